@@ -1,0 +1,44 @@
+"""`ema locations` and `ema params`: the nine nonlinearity locations and the parameter table."""
+
+from __future__ import annotations
+
+import math
+
+from rich.table import Table
+
+from ema_cli.cli.common import console, handle_errors
+from ema_cli.cli.main import app
+from ema_cli.model.nonlinearities import PLACEMENTS
+from ema_cli.model.params import PARAMS, resolve
+
+
+@app.command("locations")
+@handle_errors
+def locations_cmd() -> None:
+    """The nine nonlinearity locations of the paper: type, location, unit, default, meaning."""
+    table = Table(title="Nonlinearities (--nl NAME=VALUE, or type@location=VALUE)")
+    for col in ("name", "type", "location", "unit", "default", "magnitude means", "paper sweep"):
+        table.add_column(col, overflow="fold")
+    for pl in PLACEMENTS:
+        table.add_row(pl.alias or "", pl.type, pl.location, pl.unit, pl.default, pl.meaning,
+                      pl.paper_sweep)
+    console.print(table)
+
+
+@app.command("params")
+@handle_errors
+def params_cmd() -> None:
+    """The model parameter table (SI), as `--set plant.NAME=VALUE` takes it."""
+    values = resolve()
+    table = Table(title="Model parameters (SI; --set plant.NAME=VALUE)")
+    for col in ("name", "value", "unit", "description"):
+        table.add_column(col, overflow="fold")
+    for p in PARAMS:
+        v = values[p.name]
+        if p.choices:
+            text = next(k for k, x in p.choices.items() if x == v)
+        else:
+            text = "off" if math.isinf(v) else f"{v:.6g}"
+        table.add_row(p.name, text + ("" if p.default is not None else " (derived)"), p.unit,
+                      p.description)
+    console.print(table)

@@ -1,0 +1,159 @@
+"""The parameter table of the reference EMA (MODEL.md §3): name, SI unit, default, meaning.
+
+Everything else is derived from this one table: the kernel's column indices, the CSV/manifest
+names, the GA bounds and the `--set plant.NAME=VALUE` overrides. All values are SI.
+A default of ``None`` marks a parameter derived from the others unless it is set explicitly
+(see :func:`resolve`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from ema_cli.errors import EmaError
+from ema_cli.units import DEG
+
+
+@dataclass(frozen=True)
+class Param:
+    """One model parameter.
+
+    ``default`` is SI; ``None`` means derived (see :func:`resolve`); ``inf`` means "no limit"
+    for saturations. ``choices`` lists the accepted words of an enumerated parameter and
+    maps each to the number the kernel sees.
+    """
+
+    name: str
+    unit: str
+    default: float | None
+    description: str
+    choices: Mapping[str, float] | None = None
+    nonnegative: bool = True
+
+
+DAMPING_CHOICES = {"contact": 0.0, "paper": 1.0}
+"""Transmission damping forms: 0 = contact (T never pulls, 0 inside the gap), 1 = paper Eq. 2."""
+
+PARAMS: tuple[Param, ...] = (
+    # armature and motor
+    Param("R", "ohm", 0.5, "armature resistance"),
+    Param("L", "H", 0.3e-3, "armature inductance"),
+    Param("Kt", "N*m/A", 0.08, "torque constant"),
+    Param("Ke", "V*s/rad", 0.08, "back-EMF constant"),
+    Param("Jm", "kg*m^2", 3.0e-5, "rotor + pinion inertia"),
+    Param("bm", "N*m*s/rad", 1.0e-5, "motor viscous damping"),
+    # transmission and load
+    Param("m", "-", 24.0, "gear ratio (motor angle / load angle)"),
+    Param("JL", "kg*m^2", 0.01, "load + output gear inertia"),
+    Param("bL", "N*m*s/rad", 0.02, "load bearing viscous damping"),
+    Param("kL", "N*m/rad", 590.0, "transmission stiffness, load side"),
+    Param("zeta_t", "-", 0.2, "transmission damping ratio (sets c when c is not given)"),
+    Param("c", "N*m*s/rad", None, "transmission damping, load side; default 2*zeta_t*sqrt(kL*Jeq)"),
+    Param("alpha", "rad", 0.0, "half backlash (transmission dead band), load side"),
+    Param("damping", "-", 0.0, "transmission damping form: contact | paper",
+          choices=DAMPING_CHOICES),
+    # controllers
+    Param("Kpp", "1/s", 50.0, "position P gain (w*_L = Kpp*e_theta)"),
+    Param("Kps", "V*s/rad", 0.15, "speed PI proportional gain (motor side)"),
+    Param("Kis", "V/rad", 1.5, "speed PI integral gain"),
+    # saturations (inf = removed)
+    Param("sat1", "rad/s", 800.0 * DEG, "position-regulator output limit (load speed)"),
+    Param("sat2", "V", 40.0, "speed-regulator output limit (voltage demand)"),
+    Param("sat3", "A", 6.07 * 5.0, "current limit"),
+    # dead zones
+    Param("d1", "V", 0.0, "amplifier input dead zone half-width"),
+    Param("d3", "rad/s", 0.0, "speed sensor dead zone half-width (motor speed)"),
+    Param("d4", "rad", 0.0, "position sensor dead zone half-width (load angle)"),
+    # LuGre friction at the motor shaft
+    Param("friction", "-", 0.0, "LuGre friction at the motor shaft: 0 off, 1 on"),
+    Param("Fc", "N*m", 0.02, "Coulomb friction"),
+    Param("Fs", "N*m", None, "static friction; default 1.5*Fc"),
+    Param("vs", "rad/s", 1.0, "Stribeck velocity"),
+    Param("delta", "-", 1.0, "Stribeck exponent"),
+    Param("sigma0", "N*m/rad", None, "bristle stiffness; default 1e3*Fc"),
+    Param("sigma1", "N*m*s/rad", None, "bristle damping; default 2*0.5*sqrt(sigma0*Jm)"),
+    Param("sigma2", "N*m*s/rad", 0.0, "viscous friction coefficient (the paper's friction1)"),
+)
+
+INDEX: dict[str, int] = {p.name: i for i, p in enumerate(PARAMS)}
+"""Column of each parameter in the parameter matrix P[n_cases, N_PARAMS]."""
+N_PARAMS = len(PARAMS)
+BY_NAME: dict[str, Param] = {p.name: p for p in PARAMS}
+
+SIGMA0_PER_FC = 1.0e3  # bristle stiffness per N*m of Coulomb friction [1/rad]
+FS_PER_FC = 1.5  # static / Coulomb friction ratio [-]
+BRISTLE_DAMPING_RATIO = 0.5  # sigma1 = 2*ratio*sqrt(sigma0*Jm) [-]
+
+
+def equivalent_inertia(p: Mapping[str, float]) -> float:
+    """Load-side equivalent inertia of the two-mass transmission, Jeq = Jm*m^2*JL/(Jm*m^2+JL) [kg*m^2]."""
+    jm_load = p["Jm"] * p["m"] ** 2
+    return jm_load * p["JL"] / (jm_load + p["JL"])
+
+
+def check_value(name: str, value: object) -> float:
+    """Convert one user value for parameter ``name`` to its SI float, or raise EmaError."""
+    if name not in BY_NAME:
+        raise EmaError(f"unknown model parameter '{name}'; expected one of: {', '.join(INDEX)}")
+    spec = BY_NAME[name]
+    if spec.choices is not None:
+        if isinstance(value, str) and value in spec.choices:
+            return spec.choices[value]
+        raise EmaError(f"parameter '{name}' must be one of {sorted(spec.choices)}, got {value!r}")
+    if isinstance(value, str) and value.strip().lower() in ("off", "inf", "none"):
+        if name.startswith("sat"):
+            return math.inf
+        if name == "friction":
+            return 0.0
+        raise EmaError(f"parameter '{name}' cannot be '{value}'; expected a number in {spec.unit}")
+    if isinstance(value, str) and value.strip().lower() == "on" and name == "friction":
+        return 1.0
+    if isinstance(value, bool):
+        value = float(value)
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise EmaError(
+            f"parameter '{name}' expects a number in {spec.unit}, got {value!r}"
+        ) from None
+    if math.isnan(x):
+        raise EmaError(f"parameter '{name}' is NaN; expected a number in {spec.unit}")
+    if spec.nonnegative and x < 0:
+        raise EmaError(f"parameter '{name}' must be >= 0 ({spec.unit}), got {x}")
+    if math.isinf(x) and not name.startswith("sat"):
+        raise EmaError(f"parameter '{name}' must be finite ({spec.unit}), got {x}")
+    return x
+
+
+def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
+    """Defaults + overrides -> a complete dict of SI parameter values, derived ones filled in.
+
+    Derived unless set: ``c = 2*zeta_t*sqrt(kL*Jeq)``, ``Fs = 1.5*Fc``, ``sigma0 = 1e3*Fc``,
+    ``sigma1 = 2*0.5*sqrt(sigma0*Jm)``.
+    """
+    values: dict[str, float | None] = {p.name: p.default for p in PARAMS}
+    for name, raw in (overrides or {}).items():
+        values[name] = check_value(name, raw)
+    for name in ("m", "Jm", "JL", "L"):
+        if not values[name]:
+            raise EmaError(f"parameter '{name}' must be > 0, got {values[name]}")
+    if values["Fs"] is None:
+        values["Fs"] = FS_PER_FC * values["Fc"]  # type: ignore[operator]
+    if values["sigma0"] is None:
+        values["sigma0"] = SIGMA0_PER_FC * values["Fc"]  # type: ignore[operator]
+    if values["sigma1"] is None:
+        values["sigma1"] = 2.0 * BRISTLE_DAMPING_RATIO * math.sqrt(values["sigma0"] * values["Jm"])  # type: ignore[operator]
+    if values["c"] is None:
+        values["c"] = 2.0 * values["zeta_t"] * math.sqrt(values["kL"] * equivalent_inertia(values))  # type: ignore[arg-type,operator]
+    if values["friction"] not in (0.0, 1.0):
+        raise EmaError(f"parameter 'friction' must be 0/off or 1/on, got {values['friction']}")
+    if values["friction"] == 1.0 and (values["Fc"] <= 0 or values["vs"] <= 0):  # type: ignore[operator]
+        raise EmaError("LuGre friction needs Fc > 0 and vs > 0")
+    return {k: float(v) for k, v in values.items()}  # type: ignore[arg-type]
+
+
+def to_row(values: Mapping[str, float]) -> list[float]:
+    """A resolved parameter dict -> one row of the parameter matrix, in table order."""
+    return [values[p.name] for p in PARAMS]

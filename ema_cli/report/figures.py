@@ -1,0 +1,75 @@
+"""Matplotlib figures of simulated runs: they take data and return a Figure (no file I/O)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+
+def tracking_figure(ts: pd.DataFrame, title: str) -> Figure:
+    """Position and velocity: reference and response (top), their errors (bottom), vs time.
+
+    ``ts`` is a time-series table in edge units (``BatchResult.signals_frame``).
+    """
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
+    t = ts["t_s"]
+    ax = axes[0, 0]
+    ax.plot(t, ts["theta_ref_deg"], "k--", lw=1.2, label="reference")
+    ax.plot(t, ts["theta_load_deg"], "C0", lw=1.4, label="load angle")
+    ax.plot(t, ts["theta_motor_deg"], "C1", lw=0.9, alpha=0.8, label="motor angle / m")
+    ax.set_ylabel("position [deg]")
+    ax.set_title("Position tracking")
+    ax.legend(loc="best", fontsize=8)
+    ax = axes[0, 1]
+    ax.plot(t, ts["omega_ref_deg_s"], "k--", lw=1.2, label="reference")
+    ax.plot(t, ts["omega_load_deg_s"], "C0", lw=1.4, label="load speed")
+    ax.set_ylabel("velocity [deg/s]")
+    ax.set_title("Velocity tracking")
+    ax.legend(loc="best", fontsize=8)
+    ax = axes[1, 0]
+    ax.plot(t, ts["err_pos_deg"], "C3", lw=1.2)
+    ax.axhline(0, color="0.6", lw=0.6)
+    ax.set_ylabel("position error [deg]")
+    ax.set_xlabel("time [s]")
+    ax.set_title("Position error (reference - load)")
+    ax = axes[1, 1]
+    ax.plot(t, ts["err_vel_deg_s"], "C3", lw=1.2)
+    ax.axhline(0, color="0.6", lw=0.6)
+    ax.set_ylabel("velocity error [deg/s]")
+    ax.set_xlabel("time [s]")
+    ax.set_title("Velocity error (reference - load)")
+    for a in axes.flat:
+        a.grid(True, alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def overlay_figure(
+    series: Sequence[tuple[str, pd.DataFrame]],
+    title: str,
+    columns: tuple[str, str] = ("err_pos_deg", "err_vel_deg_s"),
+    ylabels: tuple[str, str] = ("position error [deg]", "velocity error [deg/s]"),
+    legend_title: str | None = None,
+) -> Figure:
+    """Paper-style overlay: one curve per run of two signals vs time (e.g. Figs 2-10)."""
+    fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    for k, (label, ts) in enumerate(series):
+        style = "--" if label.startswith("baseline") else "-"
+        for ax, col in zip(axes, columns, strict=True):
+            ax.plot(ts["t_s"], ts[col], style, color=f"C{k % 10}", lw=1.2, label=label)
+    for ax, lab in zip(axes, ylabels, strict=True):
+        ax.set_ylabel(lab)
+        ax.grid(True, alpha=0.3)
+        ax.axhline(0, color="0.6", lw=0.6)
+    axes[0].legend(title=legend_title, fontsize=8, loc="best")
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,82 @@
+"""Names, SI units and edge (CSV/report) units of the simulator's recorded signals and metrics.
+
+The kernel writes SI values in the column order of these tables; :func:`to_edge` converts a
+column to its edge unit once, when a table is written or plotted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ema_cli.units import DEG, RPM
+
+
+@dataclass(frozen=True)
+class Column:
+    """A recorded quantity: kernel name, SI unit, edge column name and SI->edge factor."""
+
+    name: str
+    si_unit: str
+    edge: str
+    factor: float
+    description: str
+
+
+def _col(name: str, si: str, edge: str, factor: float, desc: str) -> Column:
+    return Column(name, si, edge, factor, desc)
+
+
+SIGNALS: tuple[Column, ...] = (
+    _col("theta_ref", "rad", "theta_ref_deg", 1 / DEG, "position reference (load)"),
+    _col("theta_load", "rad", "theta_load_deg", 1 / DEG, "load angle"),
+    _col("theta_motor", "rad", "theta_motor_deg", 1 / DEG, "motor angle / gear ratio"),
+    _col("omega_ref", "rad/s", "omega_ref_deg_s", 1 / DEG, "velocity reference (load)"),
+    _col("omega_load", "rad/s", "omega_load_deg_s", 1 / DEG, "load speed"),
+    _col("omega_motor", "rad/s", "omega_motor_rpm", 1 / RPM, "motor speed"),
+    _col("current", "A", "current_a", 1.0, "armature current"),
+    _col("voltage_cmd", "V", "voltage_cmd_v", 1.0, "speed-regulator voltage demand (after SAT2)"),
+    _col("voltage_amp", "V", "voltage_amp_v", 1.0, "amplifier output (after DZ1)"),
+    _col("torque_shaft", "N*m", "torque_shaft_nm", 1.0, "transmission torque T (load side)"),
+    _col("torque_friction", "N*m", "torque_friction_nm", 1.0, "LuGre friction torque (motor)"),
+    _col("err_pos", "rad", "err_pos_deg", 1 / DEG, "position error theta_ref - theta_load"),
+    _col("err_vel", "rad/s", "err_vel_deg_s", 1 / DEG, "velocity error omega_ref - omega_load"),
+    _col("dtheta", "rad", "dtheta_rad", 1.0, "transmission deflection theta_m/m - theta_L"),
+    _col("domega", "rad/s", "domega_rad_s", 1.0, "transmission deflection rate w_m/m - w_L"),
+    _col("bristle_z", "rad", "bristle_z_rad", 1.0, "LuGre bristle deflection z"),
+)
+
+METRICS: tuple[Column, ...] = (
+    _col("iae_pos", "rad*s", "iae_pos_deg_s", 1 / DEG, "integral |position error| dt"),
+    _col("ise_pos", "rad^2*s", "ise_pos_deg2_s", 1 / DEG**2, "integral position error^2 dt"),
+    _col("itae_pos", "rad*s^2", "itae_pos_deg_s2", 1 / DEG, "integral t*|position error| dt"),
+    _col("rms_pos", "rad", "rms_err_pos_deg", 1 / DEG, "RMS position error"),
+    _col("max_pos", "rad", "max_abs_err_pos_deg", 1 / DEG, "max |position error|"),
+    _col("iae_vel", "rad", "iae_vel_deg", 1 / DEG, "integral |velocity error| dt"),
+    _col("ise_vel", "rad^2/s", "ise_vel_deg2_s", 1 / DEG**2, "integral velocity error^2 dt"),
+    _col("itae_vel", "rad*s", "itae_vel_deg_s", 1 / DEG, "integral t*|velocity error| dt"),
+    _col("rms_vel", "rad/s", "rms_err_vel_deg_s", 1 / DEG, "RMS velocity error"),
+    _col("max_vel", "rad/s", "max_abs_err_vel_deg_s", 1 / DEG, "max |velocity error|"),
+    _col("ss_err_pos", "rad", "ss_err_pos_deg", 1 / DEG,
+         "steady-state position error: mean over the last 10 % of the run"),
+    _col("overshoot", "%", "overshoot_pct", 1.0, "step overshoot, % of the step"),
+    _col("rise_time", "s", "rise_time_s", 1.0, "step rise time 10-90 %"),
+    _col("settling_time", "s", "settling_time_s", 1.0,
+         "2 % settling time after the step (NaN: not settled by the end)"),
+    _col("t50", "s", "t50_s", 1.0, "time to 50 % of the step (lag)"),
+    _col("p2p_pos", "rad", "p2p_err_pos_deg", 1 / DEG,
+         "peak-to-peak position error over the last 20 % (residual oscillation)"),
+    _col("p2p_vel", "rad/s", "p2p_err_vel_deg_s", 1 / DEG,
+         "peak-to-peak velocity error over the last 20 %"),
+    _col("peak_current", "A", "peak_current_a", 1.0, "max |armature current|"),
+    _col("peak_voltage", "V", "peak_voltage_cmd_v", 1.0, "max |voltage demand|"),
+    _col("peak_load_rate", "rad/s", "peak_load_rate_deg_s", 1 / DEG, "max |load speed|"),
+    _col("peak_torque", "N*m", "peak_torque_shaft_nm", 1.0, "max |transmission torque|"),
+    _col("diverged", "-", "diverged", 1.0, "1 if the run went non-finite or ran away"),
+    _col("t_end", "s", "t_end_s", 1.0, "time reached (the duration unless diverged)"),
+)
+
+SIG: dict[str, int] = {c.name: i for i, c in enumerate(SIGNALS)}
+MET: dict[str, int] = {c.name: i for i, c in enumerate(METRICS)}
+N_SIGNALS = len(SIGNALS)
+N_METRICS = len(METRICS)
+METRIC_BY_EDGE: dict[str, Column] = {c.edge: c for c in METRICS}
