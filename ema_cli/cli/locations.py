@@ -17,7 +17,9 @@ from ema_cli.model.params import PARAMS, resolve
 def locations_cmd() -> None:
     """The nine nonlinearity locations of the paper: type, location, unit, default, meaning."""
     table = Table(title="Nonlinearities (--nl NAME=VALUE, or type@location=VALUE)")
-    for col in ("name", "type", "location", "unit", "default", "magnitude means", "paper sweep"):
+    for col in ("name", "type", "location", "unit", "default"):
+        table.add_column(col, no_wrap=True)
+    for col in ("magnitude means", "paper sweep"):
         table.add_column(col, overflow="fold")
     for pl in PLACEMENTS:
         table.add_row(pl.alias or "", pl.type, pl.location, pl.unit, pl.default, pl.meaning,
@@ -31,8 +33,9 @@ def params_cmd() -> None:
     """The model parameter table (SI), as `--set plant.NAME=VALUE` takes it."""
     values = resolve()
     table = Table(title="Model parameters (SI; --set plant.NAME=VALUE)")
-    for col in ("name", "value", "unit", "description"):
-        table.add_column(col, overflow="fold")
+    for col in ("name", "value", "unit"):
+        table.add_column(col, no_wrap=True)
+    table.add_column("description", overflow="fold")
     for p in PARAMS:
         v = values[p.name]
         if p.choices:

@@ -17,7 +17,14 @@ from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
 from ema_cli.model.params import resolve
 from ema_cli.report.figures import tracking_figure
-from ema_cli.report.rundir import manifest, new_run_dir, write_csv, write_figure, write_json, write_text
+from ema_cli.report.rundir import (
+    manifest,
+    new_run_dir,
+    write_csv,
+    write_figure,
+    write_json,
+    write_text,
+)
 from ema_cli.sim.runner import resolution_warnings, simulate
 
 SUMMARY_METRICS = (

@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from ema_cli.config.schema import RunConfig
+from ema_cli.config.schema import KEY_MARK, RunConfig
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import nonlinearity_updates
 from ema_cli.model.params import INDEX, resolve
@@ -42,12 +42,13 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise EmaError(f"{p}: expected a mapping of keys at the top level, got {type(data).__name__}")
+        raise EmaError(
+            f"{p}: expected a mapping of keys at the top level, got {type(data).__name__}")
     return data
 
 
 def parse_value(text: str) -> Any:
-    """A command-line value -> YAML scalar (``1e-5`` -> float, ``off`` -> 'off', ``[1,2]`` -> list)."""
+    """A command-line value -> YAML scalar (``1e-5`` -> float, ``off`` stays 'off', lists)."""
     try:
         value = yaml.safe_load(text)
     except yaml.YAMLError:
@@ -98,6 +99,9 @@ def validate(model: type[M], data: Mapping[str, Any], source: str) -> M:
         for err in exc.errors():
             loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
             msg = err["msg"].removeprefix("Value error, ")
+            if msg.startswith(KEY_MARK):  # a dict key named by a validator
+                key, msg = msg[1:].split(KEY_MARK, 1)
+                loc = f"{loc}.{key}"
             if err["type"] == "extra_forbidden":
                 msg = "unknown key"
             lines.append(f"{source}: {loc}: {msg}")

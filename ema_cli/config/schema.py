@@ -30,8 +30,14 @@ class Strict(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
-def _reraise(exc: EmaError) -> ValueError:
-    return ValueError(exc.message)
+def _reraise(exc: EmaError, key: str | None = None) -> ValueError:
+    """An EmaError as a pydantic ValueError; ``key`` (a dict key) is folded into the key path."""
+    return ValueError(f"{KEY_MARK}{key}{KEY_MARK}{exc.message}" if key else exc.message)
+
+
+KEY_MARK = "\x00"
+"""Wraps a dict key at the start of a validator message; ``loader.validate`` folds it into the
+key path so errors read ``plant.kL: ...``."""
 
 
 class InputConfig(Strict):
@@ -80,7 +86,7 @@ def _check_plant(values: dict[str, Any]) -> dict[str, Any]:
         try:
             check_value(name, value)
         except EmaError as exc:
-            raise _reraise(exc) from None
+            raise _reraise(exc, name) from None
     return values
 
 
@@ -89,14 +95,15 @@ def _check_nonlinearities(values: dict[str, Any]) -> dict[str, Any]:
         try:
             lookup(name)
         except EmaError as exc:
-            raise _reraise(exc) from None
+            raise _reraise(exc, name) from None
         if isinstance(value, str) and value.strip().lower() != "off":
             try:
                 float(value)
             except ValueError:
-                raise ValueError(f"'{name}' expects a number or 'off', got {value!r}") from None
+                raise _reraise(EmaError(f"expects a number or 'off', got {value!r}"),
+                               name) from None
         if not isinstance(value, str) and (not math.isfinite(float(value)) or value < 0):
-            raise ValueError(f"'{name}' must be a finite number >= 0, got {value!r}")
+            raise _reraise(EmaError(f"must be a finite number >= 0, got {value!r}"), name)
     return values
 
 

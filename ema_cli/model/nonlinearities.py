@@ -137,7 +137,7 @@ LOCATIONS = sorted({pl.location for pl in PLACEMENTS})
 
 
 def lookup(name: str) -> Placement:
-    """A paper name (``deadzone2``) or ``type@location`` (``deadzone@transmission``) -> Placement."""
+    """A paper name (``deadzone2``) or ``type@location`` -> its Placement."""
     if name in ALIASES:
         return ALIASES[name]
     if name in BY_KEY:

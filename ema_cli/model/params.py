@@ -88,7 +88,7 @@ BRISTLE_DAMPING_RATIO = 0.5  # sigma1 = 2*ratio*sqrt(sigma0*Jm) [-]
 
 
 def equivalent_inertia(p: Mapping[str, float]) -> float:
-    """Load-side equivalent inertia of the two-mass transmission, Jeq = Jm*m^2*JL/(Jm*m^2+JL) [kg*m^2]."""
+    """Load-side equivalent inertia Jeq = Jm*m^2*JL/(Jm*m^2 + JL) [kg*m^2]."""
     jm_load = p["Jm"] * p["m"] ** 2
     return jm_load * p["JL"] / (jm_load + p["JL"])
 

@@ -42,10 +42,12 @@ _FRIC, _FC, _FS, _VS, _DELTA = (INDEX[k] for k in ("friction", "Fc", "Fs", "vs",
 _SIG0, _SIG1, _SIG2 = INDEX["sigma0"], INDEX["sigma1"], INDEX["sigma2"]
 
 # signal and metric columns
-_S_REF, _S_TH, _S_THM, _S_WREF = SIG["theta_ref"], SIG["theta_load"], SIG["theta_motor"], SIG["omega_ref"]
-_S_WL, _S_WM, _S_I, _S_U = SIG["omega_load"], SIG["omega_motor"], SIG["current"], SIG["voltage_cmd"]
-_S_UA, _S_T, _S_TF = SIG["voltage_amp"], SIG["torque_shaft"], SIG["torque_friction"]
-_S_E, _S_EV, _S_DTH, _S_DW, _S_Z = SIG["err_pos"], SIG["err_vel"], SIG["dtheta"], SIG["domega"], SIG["bristle_z"]
+_S_REF, _S_TH, _S_THM = SIG["theta_ref"], SIG["theta_load"], SIG["theta_motor"]
+_S_WREF, _S_WL, _S_WM = SIG["omega_ref"], SIG["omega_load"], SIG["omega_motor"]
+_S_I, _S_U, _S_UA = SIG["current"], SIG["voltage_cmd"], SIG["voltage_amp"]
+_S_T, _S_TF = SIG["torque_shaft"], SIG["torque_friction"]
+_S_E, _S_EV = SIG["err_pos"], SIG["err_vel"]
+_S_DTH, _S_DW, _S_Z = SIG["dtheta"], SIG["domega"], SIG["bristle_z"]
 
 _M_DIVERGED = MET["diverged"]
 _M_IAE_POS = MET["iae_pos"]

@@ -42,7 +42,8 @@ def plan_steps(duration: float, dt: float, output_interval: float | None) -> tup
     if output_interval is None:
         return n_steps, 0
     if not (math.isfinite(output_interval) and output_interval > 0):
-        raise EmaError(f"output interval must be a positive number of seconds, got {output_interval}")
+        raise EmaError(
+            f"output interval must be a positive number of seconds, got {output_interval}")
     dec = round(output_interval / dt)
     if dec < 1 or abs(dec * dt - output_interval) > 1e-9 * output_interval:
         raise EmaError(

@@ -1,0 +1,98 @@
+"""Nonlinear elements and the LuGre update against hand-computed values and fine integration."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from ema_cli.model.params import INDEX, resolve, to_row
+from ema_cli.sim.kernel import _bristle_step, _dz, _sat, _shaft_torque
+
+
+def row(**over) -> np.ndarray:
+    return np.array(to_row(resolve(over)))
+
+
+@pytest.mark.parametrize(("u", "d", "expected"), [
+    (0.5, 0.2, 0.3), (-0.5, 0.2, -0.3), (0.1, 0.2, 0.0), (-0.2, 0.2, 0.0),
+    (0.7, 0.0, 0.7), (-0.7, 0.0, -0.7), (0.0, 0.0, 0.0),
+])
+def test_dead_zone(u, d, expected):
+    assert _dz(u, d) == pytest.approx(expected, abs=1e-15)
+
+
+@pytest.mark.parametrize(("u", "lim", "expected"), [
+    (50.0, 40.0, 40.0), (-50.0, 40.0, -40.0), (12.5, 40.0, 12.5), (1e9, math.inf, 1e9),
+])
+def test_saturation(u, lim, expected):
+    assert _sat(u, lim) == expected
+
+
+def test_backlash_paper_form():
+    # Eq. 2 literally: T = kL*DZ(dth, alpha) + c*dw, c acting inside the gap too.
+    p = row(kL=590.0, alpha=0.003, c=0.8, damping="paper")
+    assert _shaft_torque(p, 0.005, 0.1) == pytest.approx(590 * 0.002 + 0.8 * 0.1)
+    assert _shaft_torque(p, -0.004, 0.0) == pytest.approx(590 * -0.001)
+    assert _shaft_torque(p, 0.001, 0.5) == pytest.approx(0.8 * 0.5)  # in the gap: damping only
+
+
+def test_backlash_contact_form():
+    # Contact: 0 inside the gap; in contact T may push but never pull.
+    p = row(kL=590.0, alpha=0.003, c=0.8, damping="contact")
+    assert _shaft_torque(p, 0.001, 0.5) == 0.0
+    assert _shaft_torque(p, 0.005, 0.1) == pytest.approx(590 * 0.002 + 0.8 * 0.1)  # 1.26 N*m
+    # separating fast: 590*0.002 + 0.8*(-3) = -1.22 < 0 -> clamped to 0 (no pull)
+    assert _shaft_torque(p, 0.005, -3.0) == 0.0
+    assert _shaft_torque(p, -0.005, 3.0) == 0.0
+    assert _shaft_torque(p, -0.005, -0.1) == pytest.approx(-590 * 0.002 - 0.8 * 0.1)
+
+
+def test_no_backlash_is_a_linear_shaft_in_both_forms():
+    for form in ("contact", "paper"):
+        p = row(kL=590.0, alpha=0.0, c=0.8, damping=form)
+        assert _shaft_torque(p, 0.001, -3.0) == pytest.approx(590 * 0.001 - 0.8 * 3.0)
+
+
+def lugre_row(sigma2=0.01):
+    return row(friction=1, sigma2=sigma2)
+
+
+@pytest.mark.parametrize("w", [-50.0, -2.0, -0.3, 0.05, 1.0, 7.0, 200.0])
+def test_lugre_steady_state_friction(w):
+    # For constant w the bristle settles at z_ss = g(w)*sign(w)/sigma0, so
+    # Tf = g(w)*sign(w) + sigma2*w with g(w) = Fc + (Fs - Fc)*exp(-|w/vs|^delta).
+    p = lugre_row()
+    dt = 1e-5
+    z = 0.0
+    for _ in range(200_000):
+        z, tf_bristle = _bristle_step(p, z, w, dt)
+    fc, fs = p[INDEX["Fc"]], p[INDEX["Fs"]]
+    g = fc + (fs - fc) * math.exp(-abs(w / p[INDEX["vs"]]) ** p[INDEX["delta"]])
+    expected = g * math.copysign(1.0, w) + p[INDEX["sigma2"]] * w
+    assert tf_bristle + p[INDEX["sigma2"]] * w == pytest.approx(expected, rel=1e-9)
+
+
+@pytest.mark.parametrize(("w", "z0"), [(0.5, 0.0), (-3.0, 1e-4), (20.0, -1e-3), (1e-6, 2e-5)])
+def test_lugre_exact_update_matches_fine_integration(w, z0):
+    # One step of the exact update vs Radau at rtol 1e-12 of dz/dt = w - sigma0*|w|/g(w)*z,
+    # and the held bristle torque vs the time average of sigma0*z + sigma1*dz/dt.
+    p = lugre_row()
+    dt = 1e-5
+    sig0, sig1 = p[INDEX["sigma0"]], p[INDEX["sigma1"]]
+    fc, fs = p[INDEX["Fc"]], p[INDEX["Fs"]]
+    g = fc + (fs - fc) * math.exp(-abs(w / p[INDEX["vs"]]))
+    a = sig0 * abs(w) / g
+
+    def rhs(_t, y):
+        z = y[0]
+        return [w - a * z, z]  # z and its integral
+
+    sol = solve_ivp(rhs, (0, dt), [z0, 0.0], method="Radau", rtol=1e-12, atol=1e-18)
+    z_ref, int_z = sol.y[0, -1], sol.y[1, -1]
+    tf_ref = sig0 * int_z / dt + sig1 * (z_ref - z0) / dt
+    z1, tf = _bristle_step(p, z0, w, dt)
+    assert z1 == pytest.approx(z_ref, rel=1e-9, abs=1e-15)
+    assert tf == pytest.approx(tf_ref, rel=1e-7, abs=1e-12)
