@@ -119,8 +119,12 @@ def _shaft_torque(p, dth, dw):
 
 
 @njit(cache=True, inline="always")
-def _algebra(p, th_m, w_m, th_l, w_l, x_i, r):
-    """Controller and transmission outputs for a state: (e_w, u_unsat, u_dem, u_amp, T)."""
+def _algebra(p, inv, th_m, w_m, th_l, w_l, x_i, r):
+    """Controller and transmission outputs for a state: (e_w, u_unsat, u_dem, u_amp, T).
+
+    ``inv`` = (1/m, 1/L, 1/Jm, 1/JL): reciprocals computed once per case (divisions are the
+    slowest operations on the RK4 stages' critical path).
+    """
     m = p[_M]
     th_meas = _dz(th_l, p[_D4])
     w_meas = _dz(w_m, p[_D3])
@@ -129,23 +133,23 @@ def _algebra(p, th_m, w_m, th_l, w_l, x_i, r):
     u_unsat = p[_KPS] * e_w + p[_KIS] * x_i
     u_dem = _sat(u_unsat, p[_SAT2])
     u_amp = _dz(u_dem, p[_D1])
-    t_shaft = _shaft_torque(p, th_m / m - th_l, w_m / m - w_l)
+    t_shaft = _shaft_torque(p, th_m * inv[0] - th_l, w_m * inv[0] - w_l)
     return e_w, u_unsat, u_dem, u_amp, t_shaft
 
 
 @njit(cache=True, inline="always")
-def _deriv(p, th_m, w_m, i, th_l, w_l, x_i, r, tf_bristle, visc):
+def _deriv(p, inv, th_m, w_m, i, th_l, w_l, x_i, r, tf_bristle, visc):
     """Time derivatives of (theta_m, w_m, i, theta_L, w_L, xI); bristle torque held."""
-    e_w, u_unsat, u_dem, u_amp, t_shaft = _algebra(p, th_m, w_m, th_l, w_l, x_i, r)
-    di = (u_amp - p[_R] * i - p[_KE] * w_m) / p[_L]
+    e_w, u_unsat, u_dem, u_amp, t_shaft = _algebra(p, inv, th_m, w_m, th_l, w_l, x_i, r)
+    di = (u_amp - p[_R] * i - p[_KE] * w_m) * inv[1]
     if abs(i) >= p[_SAT3] and di * i > 0.0:
         di = 0.0
     dxi = e_w
     if abs(u_unsat) > p[_SAT2] and e_w * u_unsat > 0.0:
         dxi = 0.0
     t_fric = tf_bristle + visc * w_m
-    dw_m = (p[_KT] * i - p[_BM] * w_m - t_shaft / p[_M] - t_fric) / p[_JM]
-    dw_l = (t_shaft - p[_BL] * w_l) / p[_JL]
+    dw_m = (p[_KT] * i - p[_BM] * w_m - t_shaft * inv[0] - t_fric) * inv[2]
+    dw_l = (t_shaft - p[_BL] * w_l) * inv[3]
     return w_m, dw_m, di, w_l, dw_l, dxi
 
 
@@ -189,7 +193,9 @@ def simulate_case_nb(p, ref_pos, ref_vel, step_info, dt, n_steps, dec, sig, met)
     fric = p[_FRIC] != 0.0
     visc = p[_SIG2] if fric else 0.0
     m = p[_M]
+    inv = (1.0 / m, 1.0 / p[_L], 1.0 / p[_JM], 1.0 / p[_JL])
     sat3 = p[_SAT3]
+    countdown = 0  # steps until the next recorded sample
     duration = n_steps * dt
     k_ss = int(math.ceil(SS_FRACTION * n_steps - 1e-9))
     k_osc = int(math.ceil(OSC_FRACTION * n_steps - 1e-9))
@@ -219,7 +225,7 @@ def simulate_case_nb(p, ref_pos, ref_vel, step_info, dt, n_steps, dec, sig, met)
         else:
             z_new = 0.0
             tf_b = 0.0
-        e_w, u_unsat, u_dem, u_amp, t_shaft = _algebra(p, th_m, w_m, th_l, w_l, x_i, r)
+        e_w, u_unsat, u_dem, u_amp, t_shaft = _algebra(p, inv, th_m, w_m, th_l, w_l, x_i, r)
         e = r - th_l
         ev = ref_vel[k] - w_l
         # --- metrics (trapezoid weights over the full-resolution samples)
@@ -258,7 +264,8 @@ def simulate_case_nb(p, ref_pos, ref_vel, step_info, dt, n_steps, dec, sig, met)
             if abs(s - 1.0) > SETTLE_BAND:
                 last_out = k
         # --- record
-        if dec > 0 and k % dec == 0:
+        if dec > 0 and countdown == 0:
+            countdown = dec
             row = sig[k // dec]
             row[_S_REF] = r
             row[_S_TH] = th_l
@@ -276,20 +283,21 @@ def simulate_case_nb(p, ref_pos, ref_vel, step_info, dt, n_steps, dec, sig, met)
             row[_S_DTH] = th_m / m - th_l
             row[_S_DW] = w_m / m - w_l
             row[_S_Z] = z
+        countdown -= 1
         if k == n_steps:
             break
         # --- RK4 step (reference at the stage times; bristle torque held)
         r1 = ref_pos[2 * k + 1]
         r2 = ref_pos[2 * k + 2]
         h = dt
-        a1, b1, c1, d1, e1, f1 = _deriv(p, th_m, w_m, i, th_l, w_l, x_i, r, tf_b, visc)
-        a2, b2, c2, d2, e2, f2 = _deriv(p, th_m + 0.5 * h * a1, w_m + 0.5 * h * b1,
+        a1, b1, c1, d1, e1, f1 = _deriv(p, inv, th_m, w_m, i, th_l, w_l, x_i, r, tf_b, visc)
+        a2, b2, c2, d2, e2, f2 = _deriv(p, inv, th_m + 0.5 * h * a1, w_m + 0.5 * h * b1,
                                         i + 0.5 * h * c1, th_l + 0.5 * h * d1,
                                         w_l + 0.5 * h * e1, x_i + 0.5 * h * f1, r1, tf_b, visc)
-        a3, b3, c3, d3, e3, f3 = _deriv(p, th_m + 0.5 * h * a2, w_m + 0.5 * h * b2,
+        a3, b3, c3, d3, e3, f3 = _deriv(p, inv, th_m + 0.5 * h * a2, w_m + 0.5 * h * b2,
                                         i + 0.5 * h * c2, th_l + 0.5 * h * d2,
                                         w_l + 0.5 * h * e2, x_i + 0.5 * h * f2, r1, tf_b, visc)
-        a4, b4, c4, d4, e4, f4 = _deriv(p, th_m + h * a3, w_m + h * b3, i + h * c3,
+        a4, b4, c4, d4, e4, f4 = _deriv(p, inv, th_m + h * a3, w_m + h * b3, i + h * c3,
                                         th_l + h * d3, w_l + h * e3, x_i + h * f3, r2, tf_b, visc)
         h6 = h / 6.0
         th_m += h6 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
