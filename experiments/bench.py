@@ -1,0 +1,192 @@
+"""`make bench`: kernel throughput, batch scaling, a same-accuracy comparison with scipy, sweeps.
+
+Every figure is the median of several repeats measured in this one run (the machines are shared
+and noisy); ratios are between numbers of the same run. Nothing here is asserted: tests check
+correctness, this script measures speed.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg
+from scipy.integrate import solve_ivp
+
+from ema_cli.model.params import resolve, to_row
+from ema_cli.sim.runner import plan_steps, simulate_batch
+from ema_cli.sim.signals import InputSignal, sample
+from ema_cli.units import DEG
+
+REPEATS = 5
+LINEAR = {"sat1": "off", "sat2": "off", "sat3": "off", "alpha": 0.0, "friction": 0}
+
+
+def median_time(fn, repeats: int = REPEATS) -> float:
+    """Median wall time of ``fn()`` over ``repeats`` calls after one warm-up call [s]."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def kernel_throughput() -> None:
+    dt = 1e-5
+    n, _ = plan_steps(1.0, dt, None)
+    ref = sample(InputSignal("step", 0.1 * DEG), dt, n)
+    print("\n== kernel throughput: 0.1 deg step, 1 s, dt 1e-5 s (100,000 RK4 steps), metrics only")
+    cases = {
+        "defaults": {},
+        "dead band 0.01 deg": {"alpha": 0.01 * DEG},
+        "LuGre friction 0.01": {"friction": 1, "sigma2": 0.01},
+    }
+    for label, over in cases.items():
+        P = np.array([to_row(resolve(over))])
+        t = median_time(lambda P=P: simulate_batch(P, [ref], None, dt, n, 0))
+        print(f"  one configuration, {label:22s} {n / t / 1e6:6.2f} M steps/s  ({t * 1e3:.1f} ms)")
+    P = np.repeat(np.array([to_row(resolve({}))]), 64, axis=0)
+    ts = median_time(lambda: simulate_batch(P, [ref], None, dt, n, 0, parallel=False), 3)
+    tp = median_time(lambda: simulate_batch(P, [ref], None, dt, n, 0, parallel=True), 3)
+    print(f"  batch of 64, serial loop           {64 * n / ts / 1e6:6.2f} M steps/s  ({ts:.2f} s)")
+    print(f"  batch of 64, numba prange threads  {64 * n / tp / 1e6:6.2f} M steps/s  ({tp:.2f} s)"
+          f"  -> x{ts / tp:.2f}")
+
+
+def _linear_matrices(p: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    m, kl, c = p["m"], p["kL"], p["c"]
+    A = np.zeros((6, 6))
+    B = np.zeros(6)
+    A[0, 1] = 1
+    A[1, :] = [-kl / m / m / p["Jm"], (-p["bm"] - c / m / m) / p["Jm"], p["Kt"] / p["Jm"],
+               kl / m / p["Jm"], c / m / p["Jm"], 0]
+    A[2, :] = [0, (-p["Kps"] - p["Ke"]) / p["L"], -p["R"] / p["L"],
+               -p["Kps"] * m * p["Kpp"] / p["L"], 0, p["Kis"] / p["L"]]
+    B[2] = p["Kps"] * m * p["Kpp"] / p["L"]
+    A[3, 4] = 1
+    A[4, :] = [kl / m / p["JL"], c / m / p["JL"], 0, -kl / p["JL"], (-c - p["bL"]) / p["JL"], 0]
+    A[5, 1], A[5, 3], B[5] = -1, -m * p["Kpp"], m * p["Kpp"]
+    return A, B
+
+
+def same_accuracy_vs_scipy() -> None:
+    """The linear loop (0.1 deg step, 0.2 s) against its exact solution (matrix exponential)."""
+    print("\n== same accuracy: linear loop, 0.1 deg step, 0.2 s; error vs the exact solution")
+    p = resolve(LINEAR)
+    A, B = _linear_matrices(p)
+    step = 0.1 * DEG
+    t_eval = np.linspace(0, 0.2, 201)
+    Ainv_B = np.linalg.solve(A, B)
+    exact = np.array([(scipy.linalg.expm(A * t) @ Ainv_B - Ainv_B)[3] for t in t_eval]) * step
+
+    dt = 1e-5
+    n, dec = plan_steps(0.2, dt, 1e-3)
+    ref = sample(InputSignal("step", step), dt, n)
+    P = np.array([to_row(p)])
+    t_ours = median_time(lambda: simulate_batch(P, [ref], None, dt, n, dec))
+    ours = simulate_batch(P, [ref], None, dt, n, dec).signals[0, :, 1]
+    err_ours = np.max(np.abs(ours - exact)) / step
+    print(f"  ema kernel RK4 dt 1e-5 s    {t_ours * 1e3:8.2f} ms   max error {err_ours:.1e} "
+          "of the step")
+
+    def rhs(_t, x):
+        return A @ x + B * step
+
+    for method, rtol in (("RK45", 1e-10), ("DOP853", 1e-12)):
+        def run(method=method, rtol=rtol):
+            return solve_ivp(rhs, (0, 0.2), np.zeros(6), method=method, rtol=rtol,
+                             atol=1e-14, t_eval=t_eval)
+        t = median_time(run, 3)
+        sol = run()
+        err = np.max(np.abs(sol.y[3] - exact)) / step
+        print(f"  scipy {method:6s} rtol {rtol:.0e}  {t * 1e3:8.2f} ms   max error {err:.1e} "
+              f"of the step   ({sol.nfev} RHS calls) -> ema x{t / t_ours:.0f} faster")
+
+
+def _python_rhs(p: dict[str, float], step: float):
+    """MODEL.md §2 without friction, written independently in plain Python for solve_ivp."""
+    m, alpha = p["m"], p["alpha"]
+
+    def dz(u: float, d: float) -> float:
+        return u - d if u > d else (u + d if u < -d else 0.0)
+
+    def rhs(_t: float, x: np.ndarray) -> list[float]:
+        th_m, w_m, i, th_l, w_l, x_i = x
+        wl_star = min(max(p["Kpp"] * (step - th_l), -p["sat1"]), p["sat1"])
+        e_w = m * wl_star - w_m
+        u_un = p["Kps"] * e_w + p["Kis"] * x_i
+        u = min(max(u_un, -p["sat2"]), p["sat2"])
+        di = (u - p["R"] * i - p["Ke"] * w_m) / p["L"]
+        if abs(i) >= p["sat3"] and di * i > 0:
+            di = 0.0
+        dxi = 0.0 if (abs(u_un) > p["sat2"] and e_w * u_un > 0) else e_w
+        dth, dw = th_m / m - th_l, w_m / m - w_l
+        t = p["kL"] * dz(dth, alpha) + p["c"] * dw
+        if alpha > 0 and (abs(dth) <= alpha or dth * t < 0):  # in the gap, or pulling
+            t = 0.0
+        return [w_m, (p["Kt"] * i - p["bm"] * w_m - t / m) / p["Jm"], di, w_l,
+                (t - p["bL"] * w_l) / p["JL"], dxi]
+
+    return rhs
+
+
+def nonlinear_vs_scipy() -> None:
+    """20 deg step with the default saturations and a 0.01 deg dead band (contact), 0.3 s."""
+    print("\n== nonlinear model: 20 deg step, saturations on, 0.01 deg dead band, 0.3 s")
+    p = resolve({"alpha": 0.01 * DEG})
+    step = 20 * DEG
+    t_eval = np.linspace(0, 0.3, 301)
+    rhs = _python_rhs(p, step)
+    t0 = time.perf_counter()
+    truth = solve_ivp(rhs, (0, 0.3), np.zeros(6), method="DOP853", rtol=1e-11, atol=1e-13,
+                      t_eval=t_eval, max_step=1e-4)
+    t_truth = time.perf_counter() - t0
+    print(f"  reference: scipy DOP853 rtol 1e-11, max_step 1e-4 s: {t_truth:.1f} s, "
+          f"{truth.nfev} RHS calls")
+    dt = 1e-5
+    n, dec = plan_steps(0.3, dt, 1e-3)
+    ref = sample(InputSignal("step", step), dt, n)
+    P = np.array([to_row(p)])
+    t_ours = median_time(lambda: simulate_batch(P, [ref], None, dt, n, dec))
+    ours = simulate_batch(P, [ref], None, dt, n, dec).signals[0, :, 1]
+    err_ours = np.max(np.abs(ours - truth.y[3])) / step
+    print(f"  ema kernel RK4 dt 1e-5 s   {t_ours * 1e3:9.2f} ms   max error {err_ours:.1e} of "
+          f"the step   ({n / t_ours / 1e6:.1f} M steps/s)")
+    for method, rtol in (("RK45", 1e-6), ("RK45", 1e-8), ("DOP853", 1e-9)):
+        t0 = time.perf_counter()
+        sol = solve_ivp(rhs, (0, 0.3), np.zeros(6), method=method, rtol=rtol, atol=1e-12,
+                        t_eval=t_eval)
+        t = time.perf_counter() - t0
+        err = np.max(np.abs(sol.y[3] - truth.y[3])) / step
+        print(f"  scipy {method:6s} rtol {rtol:.0e} {t * 1e3:9.2f} ms   max error {err:.1e} of "
+              f"the step   ({sol.nfev} RHS calls) -> ema x{t / t_ours:.0f} faster")
+
+
+def sweep_bench() -> None:
+    path = Path(__file__).with_name("bench_sweep.py")
+    if not path.exists():
+        return
+    spec = importlib.util.spec_from_file_location("bench_sweep", path)
+    mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(mod)  # type: ignore[union-attr]
+    print("\n== sweep: 1,000 jobs end to end")
+    mod.main()
+
+
+def main() -> int:
+    print(f"python {sys.version.split()[0]}, numpy {np.__version__}; medians of {REPEATS} repeats")
+    kernel_throughput()
+    same_accuracy_vs_scipy()
+    nonlinear_vs_scipy()
+    sweep_bench()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
