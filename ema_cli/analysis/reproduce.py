@@ -1,0 +1,177 @@
+"""Run an experiment batch (the paper reproduction): studies, thresholds, identification, claims.
+
+Compute only: returns a :class:`Reproduction` with every table and number; ``report.reproduce``
+writes REPORT.md, claims.csv and the figures.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ema_cli.analysis.claims import Verdict, evaluate_claims
+from ema_cli.analysis.threshold import (
+    Criterion,
+    ThresholdResult,
+    find_threshold,
+    simulation_evaluator,
+)
+from ema_cli.config.experiment import ExperimentConfig, ThresholdSpec
+from ema_cli.config.loader import input_signal, load_config, read_yaml, validate
+from ema_cli.config.schema import StudyConfig
+from ema_cli.errors import EmaError
+from ema_cli.model.nonlinearities import lookup
+
+
+@dataclass
+class ThresholdOutcome:
+    """A computed threshold beside the paper's value."""
+
+    spec: ThresholdSpec
+    result: ThresholdResult
+    criteria: list[Criterion]
+    value: float
+    unit: str
+    input_desc: str
+
+
+@dataclass
+class Reproduction:
+    """Everything a reproduction computed."""
+
+    exp: ExperimentConfig
+    path: Path
+    studies: dict[str, pd.DataFrame] = field(default_factory=dict)
+    sweeps: dict[str, Any] = field(default_factory=dict)
+    thresholds: list[ThresholdOutcome] = field(default_factory=list)
+    identification: dict[str, Any] | None = None
+    ranking: pd.DataFrame | None = None
+    scalars: dict[str, float] = field(default_factory=dict)
+    verdicts: list[Verdict] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> list[Verdict]:
+        return [v for v in self.verdicts if not v.passed]
+
+
+def load_experiment(path: Path) -> ExperimentConfig:
+    """Read and validate an experiment file (errors name the file and key)."""
+    exp = validate(ExperimentConfig, read_yaml(path), str(path))
+    for s in exp.studies:
+        if not (path.parent / s.config).is_file():
+            raise EmaError(f"{path}: study '{s.id}': config '{s.config}' does not exist")
+    for t in exp.thresholds:
+        if not (path.parent / t.config).is_file():
+            raise EmaError(f"{path}: threshold '{t.id}': config '{t.config}' does not exist")
+    return exp
+
+
+def _study_config(path: Path, rel: str) -> tuple[StudyConfig, Path]:
+    p = path.parent / rel
+    return load_config(p, (), model=StudyConfig), p
+
+
+def compute_threshold(path: Path, spec: ThresholdSpec) -> ThresholdOutcome:
+    """Run one threshold search of the batch."""
+    cfg, cpath = _study_config(path, spec.config)
+    signal = input_signal(cfg.input, cpath.parent)
+    nls = {k: v for k, v in cfg.nonlinearities.items() if k != spec.vary}
+    ev = simulation_evaluator(spec.vary, cfg.plant, nls, signal, cfg.simulation.duration_s,
+                              cfg.simulation.dt_s, cfg.friction_reading)
+    criteria = [Criterion.parse(r) for r in spec.require]
+    if spec.require_relative:
+        if spec.reference_value is None:
+            raise EmaError(f"{path}: threshold '{spec.id}': require_relative needs "
+                           "reference_value")
+        ref = ev(np.array([spec.reference_value])).iloc[0]
+        for rr in spec.require_relative:
+            crit = Criterion(rr.metric, "<=", rr.factor * float(ref[rr.metric]) + rr.margin)
+            crit.check()
+            criteria.append(crit)
+    res = find_threshold(ev, criteria, spec.range[0], spec.range[1], spec.direction,
+                         rtol=spec.rtol)
+    value, unit = res.threshold, spec.unit or lookup(spec.vary).unit
+    if spec.percent_of_input:
+        value, unit = 100 * res.threshold / abs(cfg.input.amplitude_deg), "% of the input"
+    return ThresholdOutcome(spec, res, criteria, value, unit, signal.describe())
+
+
+def compute_ranking(rep: Reproduction) -> pd.DataFrame:
+    """Worst ratio of the ranking metric to the study's baseline, per study, sorted."""
+    spec = rep.exp.ranking
+    assert spec is not None
+    rows = []
+    for sid in spec.studies:
+        df = rep.studies.get(sid)
+        if df is None:
+            raise EmaError(f"ranking: no study '{sid}'")
+        base = df[df["label"].astype(str).str.startswith("baseline")]
+        if base.empty:
+            raise EmaError(f"ranking: study '{sid}' has no baseline run")
+        b = float(base[spec.metric].iloc[0])
+        others = df.drop(base.index)
+        ratios = others[spec.metric].astype(float) / b
+        k = int(np.nanargmax(ratios.to_numpy()))
+        rows.append({"study": sid, "worst_run": str(others["label"].iloc[k]),
+                     "baseline": b, "worst": float(others[spec.metric].iloc[k]),
+                     "ratio": float(ratios.iloc[k])})
+    out = pd.DataFrame(rows).sort_values("ratio", ascending=False, ignore_index=True)
+    out.insert(0, "rank", np.arange(1, len(out) + 1))
+    return out
+
+
+def run_identification_step(settings: dict[str, Any], out: Path | None) -> dict[str, Any]:
+    """The paper's §3.1 identification through ``ema identify``'s library entry point."""
+    from ema_cli.identify.run import identification_summary
+
+    return identification_summary(settings, out)
+
+
+def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
+                   progress: bool = True, log: Any = print) -> Reproduction:
+    """Run the whole batch into ``out``; returns the computed Reproduction."""
+    from ema_cli.sweep.run import run_sweep
+
+    exp = load_experiment(path)
+    rep = Reproduction(exp, path)
+    t0 = time.perf_counter()
+    for s in exp.studies:
+        cfg, cpath = _study_config(path, s.config)
+        log(f"study {s.id}: {cpath}")
+        res = run_sweep(cfg, out / "studies" / s.id, n_jobs=n_jobs, progress=progress,
+                        base_dir=cpath.parent, source=str(cpath))
+        rep.studies[s.id] = res.metrics
+        rep.sweeps[s.id] = res
+    rep.timings["studies"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for t in exp.thresholds:
+        log(f"threshold {t.id}: {t.vary} over {t.range[0]:g}..{t.range[1]:g}")
+        outcome = compute_threshold(path, t)
+        rep.thresholds.append(outcome)
+        rep.scalars[t.id] = outcome.value
+    rep.timings["thresholds"] = time.perf_counter() - t0
+    if exp.identification is not None:
+        t0 = time.perf_counter()
+        log("identification (paper §3.1)")
+        rep.identification = run_identification_step(exp.identification.settings,
+                                                     out / "identification")
+        for k, v in rep.identification.items():
+            if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v):
+                rep.scalars[f"identification.{k}"] = float(v)
+        rep.timings["identification"] = time.perf_counter() - t0
+    if exp.ranking is not None:
+        rep.ranking = compute_ranking(rep)
+        first = str(rep.ranking["study"].iloc[0])
+        rep.scalars["ranking.paper_first_rank"] = float(
+            rep.ranking.index[rep.ranking["study"] == exp.ranking.paper_first][0] + 1
+        ) if exp.ranking.paper_first in set(rep.ranking["study"]) else math.nan
+        rep.scalars["ranking.first_is_paper_first"] = float(first == exp.ranking.paper_first)
+    rep.verdicts = evaluate_claims(exp.claims, rep.studies, rep.scalars)
+    return rep
