@@ -180,10 +180,14 @@ def sweep_bench() -> None:
 
 
 def main() -> int:
+    from ema_cli.identify.bench import bench_identify
+
     print(f"python {sys.version.split()[0]}, numpy {np.__version__}; medians of {REPEATS} repeats")
     kernel_throughput()
     same_accuracy_vs_scipy()
     nonlinear_vs_scipy()
+    print("\n== identification")
+    bench_identify()
     sweep_bench()
     return 0
 

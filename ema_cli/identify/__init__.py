@@ -1,0 +1,1 @@
+"""Identification of the transmission stiffness and backlash: data, problem, GA, exact solver."""

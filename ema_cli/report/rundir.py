@@ -19,6 +19,15 @@ from ema_cli.errors import EmaError
 RESULTS_ROOT = Path("results")
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_FILE_MODE = 0o666 & ~_umask()  # what open() would give a new file
+
+
 def _json_default(o: Any) -> Any:
     import numpy as np
 
@@ -39,6 +48,7 @@ def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
+    os.chmod(tmp, _FILE_MODE)  # mkstemp creates 0600; results are ordinary shared files
     try:
         write(Path(tmp))
         os.replace(tmp, path)

@@ -1,0 +1,167 @@
+"""`ema identify`: identify the gear stiffness kL and half backlash alpha (paper §3.1) with a GA."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.table import Table
+
+from ema_cli.cli.common import console, err_console, handle_errors, parse_assignments
+from ema_cli.cli.main import app
+from ema_cli.config.loader import read_yaml, validate
+from ema_cli.errors import EmaError
+from ema_cli.identify.problem import PARAM_UNITS
+from ema_cli.identify.run import IdentificationResult, run_identification
+from ema_cli.identify.settings import IdentifySettings
+from ema_cli.report.identify_figures import write_identification
+from ema_cli.report.rundir import new_run_dir
+
+Range = tuple[float, float]
+
+
+def _set(data: dict[str, Any], path: str, value: Any) -> None:
+    """Set a dotted key in nested dicts (CLI options override the YAML config)."""
+    keys = path.split(".")
+    node = data
+    for k in keys[:-1]:
+        nxt = node.get(k)
+        if not isinstance(nxt, dict):
+            nxt = node[k] = {}
+        node = nxt
+    node[keys[-1]] = value
+
+
+def _fmt(v: float | None, digits: int = 6) -> str:
+    return "—" if v is None else f"{v:.{digits}g}"
+
+
+def result_table(res: IdentificationResult) -> Table:
+    """Identified (median over runs), truth, |error| % (median / worst), LS optimum ± SE and
+    the runs' |distance| to it."""
+    summ = res.summary()
+    n_runs = len(res.runs)
+    many = n_runs > 1
+    table = Table(title=f"ema identify · {res.settings.method} · model {res.settings.model} · "
+                        f"{n_runs} run(s)", header_style="bold")
+    table.caption = (
+        ("identified: median over the runs; error and Δopt: median/worst over the runs. "
+         if many else "") + "error = |identified − truth|/truth; Δopt = |identified − LS "
+        "optimum|/optimum; SE: standard error of the LS optimum")
+    for col in ("param", "identified", "truth", "error %", "LS optimum", "SE", "Δopt %"):
+        table.add_column(col, justify="left" if col == "param" else "right")
+    for n, s in summ.items():
+        if s["error_pct_median"] is None:
+            e = "—"
+        elif many:
+            e = f"{s['error_pct_median']:.2g}/{s['error_pct_worst']:.2g}"
+        else:
+            e = f"{s['error_pct_worst']:.2g}"
+        d = (f"{s['dist_opt_pct_median']:.2g}/{s['dist_opt_pct_worst']:.2g}" if many
+             else f"{s['dist_opt_pct_worst']:.2g}")
+        table.add_row(n, _fmt(s["median"]), _fmt(s["truth"]), e,
+                      _fmt(s["optimum"]), _fmt(s["optimum_se"], 2), d)
+    return table
+
+
+@app.command("identify")
+@handle_errors
+def identify_cmd(
+    config: Annotated[Path | None, typer.Argument(
+        help="YAML settings (e.g. configs/identify.yaml); options below override it.")] = None,
+    k_range: Annotated[Range | None, typer.Option(
+        "--k-range", help="kL search range LO HI [N*m/rad] (default 500 700).")] = None,
+    alpha_range: Annotated[Range | None, typer.Option(
+        "--alpha-range", help="alpha search range LO HI in rad (default 0.002 0.004).")] = None,
+    c_range: Annotated[Range | None, typer.Option(
+        "--c-range", help="c search range LO HI when fitted [N*m*s/rad] (default 0 5).")] = None,
+    method: Annotated[str | None, typer.Option(
+        "--method", help="ga (improved GA, default), ga-paper (the paper's binary GA) or "
+                         "exact (least squares only).")] = None,
+    runs: Annotated[int | None, typer.Option(
+        "--runs", help="GA runs with seeds SeedSequence(seed).spawn(N) (default 1).")] = None,
+    n_jobs: Annotated[int | None, typer.Option(
+        "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1)."
+    )] = None,
+    data: Annotated[Path | None, typer.Option(
+        "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
+                       "(default: synthetic data from the simulator).")] = None,
+    columns: Annotated[list[str] | None, typer.Option(
+        "--columns", help="Map a column: NAME=FILE_COLUMN, e.g. torque_nm=T_meas; repeatable."
+    )] = None,
+    noise: Annotated[float | None, typer.Option(
+        "--noise", help="Synthetic data: Gaussian noise, % of the torque RMS (seeded).")] = None,
+    damping: Annotated[str | None, typer.Option(
+        "--damping", help="Synthetic data: damping form of the simulator, contact or paper.")
+    ] = None,
+    model: Annotated[str | None, typer.Option(
+        "--model", help="Torque form fitted: contact (default) or paper (Eq. 2).")] = None,
+    c: Annotated[float | None, typer.Option(
+        "--c", help="Fix the damping c [N*m*s/rad] (default: the simulator's for synthetic "
+                    "data; fitted for --data).")] = None,
+    fit_c: Annotated[bool | None, typer.Option(
+        "--fit-c/--no-fit-c", help="Identify c too (default: yes for --data, no otherwise)."
+    )] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="Seed of GA and noise.")] = None,
+    pop: Annotated[int | None, typer.Option("--pop", help="Population size (100).")] = None,
+    generations: Annotated[int | None, typer.Option(
+        "--generations", help="Evaluated generations incl. the initial one (200).")] = None,
+    pc: Annotated[float | None, typer.Option(
+        "--pc", help="Crossover probability per pair of parents (0.85).")] = None,
+    pm: Annotated[float | None, typer.Option(
+        "--pm", help="Mutation probability (0.05): per bit for ga-paper, per gene (parameter) "
+                     "for ga.")] = None,
+    bits: Annotated[int | None, typer.Option(
+        "--bits", help="Bits per parameter, ga-paper binary coding (20).")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="Output folder (default: results/identify/<stamp>_<hash>/).")] = None,
+) -> None:
+    """Identify kL and alpha (and c) from transmission torque data by minimising the paper's
+    Eq. 8, J = sum (T_meas - T_model)^2, with a GA, beside the exact least-squares optimum.
+    Writes identification.json, runs.csv, history.csv, convergence.png, fit.png and
+    manifest.json."""
+    raw: dict[str, Any] = read_yaml(config) if config is not None else {}
+    options: dict[str, Any] = {
+        "k_range": k_range, "alpha_range": alpha_range, "c_range": c_range, "method": method,
+        "runs": runs, "n_jobs": n_jobs, "data": str(data) if data is not None else None,
+        "synthetic.noise_pct": noise, "synthetic.damping": damping, "model": model, "c": c,
+        "fit_c": fit_c, "seed": seed, "ga.pop": pop, "ga.generations": generations,
+        "ga.pc": pc, "ga.pm": pm, "ga.bits": bits,
+    }
+    for path, value in options.items():
+        if value is not None:
+            _set(raw, path, list(value) if isinstance(value, tuple) else value)
+    if columns:
+        _set(raw, "columns", {**raw.get("columns", {}),
+                              **dict(parse_assignments(columns, "--columns"))})
+    if c is not None and fit_c is None:
+        _set(raw, "fit_c", False)  # --c fixes c even if the config asked to fit it
+    settings = validate(IdentifySettings, raw, str(config) if config else "options")
+    if settings.data is not None and (noise is not None or damping is not None):
+        raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
+                       "with --data")
+    if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise EmaError(f"output folder '{out}' exists and is not empty; choose another --out")
+
+    res = run_identification(settings)
+    folder = new_run_dir("identify", settings.model_dump(mode="json"), out)
+    write_identification(res, folder, command="identify")
+
+    console.print(result_table(res))
+    for w in res.warnings:
+        err_console.print(f"[yellow]warning:[/] {w}")
+    console.print("units: " + ", ".join(f"{n} {PARAM_UNITS[n]}" for n in res.names))
+    js = res.to_json()
+    opt = res.optimum
+    costs = [r.cost for r in res.runs]
+    console.print(f"data: {res.data.source} ({res.data.n_samples:,} samples); {js['experiment']}")
+    console.print(
+        f"J: best {min(costs):.6g}, LS optimum {opt.cost:.6g} N²·m²; kL–alpha correlation "
+        f"{opt.corr_k_alpha:.3f}; "
+        + ("c fitted" if res.problem.fit_c else f"c fixed at {res.problem.c_fixed:.6g} N·m·s/rad"))
+    evals = res.runs[0].evaluations
+    per_run = sum(r.wall_time_s for r in res.runs) / len(res.runs)
+    console.print(
+        f"{len(res.runs)} run(s) × {evals:,} evaluations, {per_run:.3f} s per run; exact "
+        f"solver {opt.wall_time_s * 1e3:.1f} ms; total {res.wall_time_s:.2f} s -> {folder}")

@@ -1,0 +1,154 @@
+"""The identification problem: the paper's Eq. 8 cost of a transmission-torque model, batched.
+
+Model (MODEL.md §2, the simulator's ``_shaft_torque`` exactly), load side, SI::
+
+    T_paper   = kL*DZ(dth, alpha) + c*dw                        (paper Eq. 2)
+    T_contact = 0 inside the gap (|dth| <= alpha); in contact the Eq. 2 torque, clamped so it
+                pushes but never pulls: max(T_paper, 0) if dth > alpha, min(T_paper, 0) if
+                dth < -alpha.  (alpha = 0 gives Eq. 2, as in the simulator.)
+
+    J(kL, alpha[, c]) = sum_i (T_meas_i - T_model_i)^2          [N^2*m^2]   (paper Eq. 8)
+
+kL [N*m/rad], alpha [rad] and c [N*m*s/rad] enter as the columns of ``X[n_pop, n_par]`` in the
+order of :attr:`TorqueProblem.names`; c is either a column (fitted) or a fixed value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ema_cli._numba import njit
+
+FORMS = ("contact", "paper")
+PARAM_UNITS = {"kL": "N*m/rad", "alpha": "rad", "c": "N*m*s/rad"}
+
+
+@njit(cache=True, inline="always")
+def torque_nb(k, alpha, c, contact, dth, dw):
+    """One sample of the transmission torque [N*m]; mirrors ``sim.kernel._shaft_torque``."""
+    if dth > alpha:
+        spring = k * (dth - alpha)
+    elif dth < -alpha:
+        spring = k * (dth + alpha)
+    else:
+        spring = 0.0
+    if alpha > 0.0 and contact:
+        if dth > alpha:
+            t = spring + c * dw
+            return t if t > 0.0 else 0.0
+        if dth < -alpha:
+            t = spring + c * dw
+            return t if t < 0.0 else 0.0
+        return 0.0
+    return spring + c * dw
+
+
+@njit(cache=True)
+def cost_batch_nb(X, dth, dw, tq, c_fixed, contact, out):
+    """Eq. 8 for every row of ``X[n_pop, 2 or 3]`` (kL, alpha[, c]) into ``out[n_pop]``.
+
+    A row with a non-finite parameter or a negative alpha gets ``inf``.
+    """
+    n_pop = X.shape[0]
+    n = dth.shape[0]
+    fit_c = X.shape[1] > 2
+    for p in range(n_pop):
+        k = X[p, 0]
+        alpha = X[p, 1]
+        c = X[p, 2] if fit_c else c_fixed
+        if not (np.isfinite(k) and np.isfinite(alpha) and np.isfinite(c)) or alpha < 0.0:
+            out[p] = np.inf
+            continue
+        s = 0.0
+        for i in range(n):
+            r = tq[i] - torque_nb(k, alpha, c, contact, dth[i], dw[i])
+            s += r * r
+        out[p] = s
+
+
+def dead_zone(dth: np.ndarray, alpha: float) -> np.ndarray:
+    """DZ(dth, alpha) = sign(dth)*max(|dth| - alpha, 0) [rad]."""
+    return np.sign(dth) * np.maximum(np.abs(dth) - alpha, 0.0)
+
+
+def torque_model(
+    dth: np.ndarray, dw: np.ndarray, kL: float, alpha: float, c: float, form: str
+) -> np.ndarray:
+    """Transmission torque [N*m] of one parameter set for arrays of dth [rad] and dw [rad/s]."""
+    t = kL * dead_zone(dth, alpha) + c * dw
+    if form == "contact" and alpha > 0.0:
+        t = np.where(dth > alpha, np.maximum(t, 0.0),
+                     np.where(dth < -alpha, np.minimum(t, 0.0), 0.0))
+    elif form != "paper" and form != "contact":
+        raise ValueError(f"form must be one of {FORMS}, got {form!r}")
+    return t
+
+
+@dataclass(frozen=True)
+class TorqueProblem:
+    """Eq. 8 over the data (dth [rad], dw [rad/s], torque [N*m]) with bounds on the parameters.
+
+    ``names`` is ("kL", "alpha") with c fixed at ``c_fixed`` [N*m*s/rad], or ("kL", "alpha", "c")
+    when c is fitted. ``lower``/``upper`` are the GA bounds in the same order.
+    """
+
+    dth: np.ndarray
+    dw: np.ndarray
+    torque: np.ndarray
+    form: str
+    lower: np.ndarray
+    upper: np.ndarray
+    c_fixed: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.form not in FORMS:
+            raise ValueError(f"form must be one of {FORMS}, got {self.form!r}")
+        for name in ("dth", "dw", "torque", "lower", "upper"):
+            object.__setattr__(self, name,
+                               np.ascontiguousarray(getattr(self, name), dtype=np.float64))
+        if not (self.dth.shape == self.dw.shape == self.torque.shape and self.dth.ndim == 1):
+            raise ValueError("dth, dw and torque must be 1-D arrays of one length")
+        if self.lower.shape not in ((2,), (3,)) or self.lower.shape != self.upper.shape:
+            raise ValueError("bounds must have 2 (kL, alpha) or 3 (kL, alpha, c) entries")
+
+    @property
+    def fit_c(self) -> bool:
+        """True when c is a free parameter (third column)."""
+        return self.lower.shape[0] == 3
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names in column order."""
+        return ("kL", "alpha", "c") if self.fit_c else ("kL", "alpha")
+
+    @property
+    def n_samples(self) -> int:
+        """Number of data samples."""
+        return int(self.dth.shape[0])
+
+    def evaluate(self, X: np.ndarray) -> np.ndarray:
+        """J[n_pop] for ``X[n_pop, n_par]`` in one compiled call (memory O(n_pop))."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != self.lower.shape[0]:
+            raise ValueError(f"X must have shape (n_pop, {self.lower.shape[0]}), got {X.shape}")
+        out = np.empty(X.shape[0])
+        cost_batch_nb(X, self.dth, self.dw, self.torque, float(self.c_fixed),
+                      self.form == "contact", out)
+        return out
+
+    def full_params(self, x: np.ndarray) -> dict[str, float]:
+        """One parameter vector -> {"kL", "alpha", "c"} (c fixed or fitted)."""
+        x = np.asarray(x, dtype=np.float64)
+        c = float(x[2]) if self.fit_c else float(self.c_fixed)
+        return {"kL": float(x[0]), "alpha": float(x[1]), "c": c}
+
+    def model_torque(self, x: np.ndarray) -> np.ndarray:
+        """T_model [N*m] at the data for one parameter vector."""
+        p = self.full_params(x)
+        return torque_model(self.dth, self.dw, p["kL"], p["alpha"], p["c"], self.form)
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """T_meas - T_model [N*m] for one parameter vector."""
+        return self.torque - self.model_torque(x)
