@@ -13,6 +13,7 @@ from rich.table import Table
 from ema_cli.cli.common import console, err_console, handle_errors, parse_assignments
 from ema_cli.cli.main import app
 from ema_cli.config.loader import load_config, parse_value, resolve_run
+from ema_cli.config.schema import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
 from ema_cli.model.params import resolve
@@ -96,7 +97,7 @@ def simulate_cmd(
     if dt is not None:
         overrides.append(("simulation.dt_s", dt))
     overrides += [(f"nonlinearities.{k}", v) for k, v in nl_items]
-    cfg = load_config(config, overrides)
+    cfg = load_config(config, overrides, StudyConfig)
     run = resolve_run(cfg, config.parent if config else None)
     if out is not None and out.exists() and any(out.iterdir()):
         raise EmaError(f"output folder '{out}' exists and is not empty; choose another --out")

@@ -1,0 +1,175 @@
+"""`ema sweep`, `ema validate` and `ema show`: run, check and inspect a study config."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+import yaml
+from rich.markup import escape
+from rich.table import Table
+
+from ema_cli.cli.common import console, err_console, handle_errors, parse_assignments
+from ema_cli.cli.main import app
+from ema_cli.errors import EmaError
+from ema_cli.report.sweep_report import metric_label
+from ema_cli.sweep.expand import check_size
+from ema_cli.sweep.plan import fmt, plan_sweep
+from ema_cli.sweep.run import FAILED, SweepResult, run_sweep
+from ema_cli.sweep.study import load_study
+
+MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)
+MAX_TABLE_METRICS = 4  # metric columns of the terminal summary table
+LABEL_WIDTH = 30  # widest "swept values" column of the terminal table [characters]
+METRIC_WIDTH = 7  # narrowest metric column of the terminal table [characters]
+MAX_SHOW_JOBS = 50  # jobs listed by `ema show` unless --all
+
+F = TypeVar("F", bound=Callable[..., Any])
+ConfigArg = Annotated[Path, typer.Argument(help="YAML study config, e.g. configs/deadzone2.yaml.")]
+SetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", help="Override a config value by dotted path (list items by index), e.g. "
+                  "plant.Kpp=60, sweep.axes.0.values=[0.01,0.1], outputs.timeseries=false; "
+                  "repeatable.")]
+
+
+def literal_errors(fn: F) -> F:
+    """Print an EmaError's message literally (rich would take ``[dask]`` or ``[deg]`` for
+    markup and drop it), then exit with its code; ``handle_errors`` handles the rest."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except EmaError as exc:
+            err_console.print(f"[bold red]error:[/] {escape(exc.message)}")
+            raise typer.Exit(exc.exit_code) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _load(config: Path, set_: list[str] | None):
+    overrides = parse_assignments(set_, "--set")
+    return load_study(config, overrides), overrides
+
+
+def summary_table(result: SweepResult) -> Table:
+    """The closing terminal table: one row per job (capped), key metrics in edge units."""
+    cfg = result.plan.cfg
+    metrics = list(cfg.outputs.metrics)[:MAX_TABLE_METRICS]
+    df = result.metrics
+    counts = result.counts()
+    table = Table(title=f"{cfg.name}: {len(df)} jobs ({counts['ok']} ok, {counts['diverged']} "
+                        f"diverged, {counts['failed']} failed, {counts['pending']} not run)",
+                  header_style="bold")
+    table.add_column("job", no_wrap=True)
+    table.add_column("swept values", max_width=LABEL_WIDTH, overflow="fold")
+    table.add_column("status", no_wrap=True)
+    for m in metrics:
+        table.add_column(metric_label(m), justify="right", min_width=METRIC_WIDTH)
+    shown = df if len(df) <= MAX_TABLE_ROWS else df.head(MAX_TABLE_ROWS)
+    for _, row in shown.iterrows():
+        style = "red" if row["status"] == FAILED else None
+        table.add_row(row["job"], row["label"], row["status"],
+                      *[fmt(float(row[m])) if row[m] == row[m] else "n/a" for m in metrics],
+                      style=style)
+    if len(df) > MAX_TABLE_ROWS:
+        table.caption = f"first {MAX_TABLE_ROWS} of {len(df)} jobs; all in metrics.csv"
+    return table
+
+
+@app.command("sweep")
+@handle_errors
+@literal_errors
+def sweep_cmd(
+    config: ConfigArg,
+    set_: SetOpt = None,
+    n_jobs: Annotated[int | None, typer.Option(
+        "--n-jobs", "-j", help="Workers (processes or threads); -1: all cores "
+                               "(default: parallel.n_jobs, else all cores).")] = None,
+    backend: Annotated[str | None, typer.Option(
+        "--backend", help="auto | loky (processes) | threads (numba prange) | dask "
+                          "(default: parallel.backend).")] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Dask scheduler address for --backend dask, e.g. "
+                            "tcp://10.0.0.5:8786.")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="Output folder (default: results/<name>/<timestamp>_<hash>/); an "
+                      "earlier run of the same sweep there is resumed.")] = None,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Recompute every job, even those in the cache.")] = False,
+    cache_dir: Annotated[Path | None, typer.Option(
+        "--cache-dir", help="Job cache folder (default: results/.cache/sweep).")] = None,
+    progress: Annotated[bool, typer.Option(
+        "--progress/--no-progress", help="Show a progress bar with ETA (stderr).")] = True,
+) -> None:
+    """Run a sweep: every job of CONFIG, in parallel, cached and resumable; writes metrics.csv,
+    time series, figures, summary.md and manifest.json."""
+    cfg, overrides = _load(config, set_)
+    if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
+        raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
+    result = run_sweep(cfg, out, n_jobs, backend, force, progress, scheduler=scheduler,
+                       cache_dir=cache_dir, base_dir=config.parent, source=str(config),
+                       overrides=overrides)
+    for w in result.plan.warnings:
+        err_console.print(f"[yellow]warning:[/] {w}")
+    for n in result.plan.notes:
+        console.print(f"note: {n}")
+    console.print(summary_table(result))
+    counts = result.counts()
+    t = result.timings
+    console.print(f"{result.computed} runs computed, {result.cached} cached; backend "
+                  f"{result.backend} x{result.workers}; {t.get('total', 0.0):.2f} s "
+                  f"(kernel {t.get('kernel', 0.0):.2f} s) -> {result.folder}")
+    if counts["failed"]:
+        raise EmaError(f"{counts['failed']} job(s) failed (errors in {result.folder}/"
+                       "manifest.json); re-run the same command to retry them, finished jobs "
+                       "are cached", 1)
+
+
+@app.command("validate")
+@handle_errors
+@literal_errors
+def validate_cmd(config: ConfigArg, set_: SetOpt = None) -> None:
+    """Check CONFIG against the schema (fast: nothing is simulated) and count its jobs."""
+    cfg, _ = _load(config, set_)
+    n = check_size(cfg.sweep, str(config))
+    axes = "; ".join(f"{a.label} ({a.n_points()} values)" for a in cfg.sweep.axes)
+    console.print(f"{config}: valid; {cfg.sweep.mode} over {axes} -> {n} jobs"
+                  + (" (baseline included)" if cfg.sweep.baseline else ""))
+
+
+@app.command("show")
+@handle_errors
+@literal_errors
+def show_cmd(
+    config: ConfigArg,
+    set_: SetOpt = None,
+    all_: Annotated[bool, typer.Option("--all", help="List every job (default: the first "
+                                                     f"{MAX_SHOW_JOBS}).")] = False,
+) -> None:
+    """Print the resolved config (every default filled in) and the jobs it expands to."""
+    cfg, _ = _load(config, set_)
+    plan = plan_sweep(cfg, config.parent, str(config))
+    console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip())
+    table = Table(title=f"{len(plan.jobs)} jobs ({plan.n_unique} distinct runs); input "
+                        f"{plan.signal.describe()}, {plan.duration:g} s at dt {plan.dt:g} s",
+                  header_style="bold")
+    for col in ("job", "swept values", "key"):
+        table.add_column(col)
+    jobs = plan.jobs if all_ else plan.jobs[:MAX_SHOW_JOBS]
+    for j in jobs:
+        table.add_row(j.id, j.label, j.key)
+    if len(jobs) < len(plan.jobs):
+        table.caption = f"first {len(jobs)} of {len(plan.jobs)}; --all lists every job"
+    console.print(table)
+    for info in plan.axes:
+        console.print(f"axis {info.name}: {info.description}; columns {', '.join(info.columns)}")
+    for key, v in plan.scales.items():
+        console.print(f"relative scale {key}: {v:.6g} (baseline peak)")
+    for n in plan.notes:
+        console.print(f"note: {n}")
+    for w in plan.warnings:
+        err_console.print(f"[yellow]warning:[/] {w}")

@@ -1,0 +1,178 @@
+"""Whole sweeps: equal to `ema simulate`, bit-identical across backends, resumable, on Dask."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+import ema_cli.sweep.execute as execute
+from ema_cli.cli.main import app
+from ema_cli.sim.runner import simulate
+from ema_cli.sim.tables import METRICS
+from ema_cli.sweep.execute import WARM_STEPS
+from ema_cli.sweep.run import run_sweep
+from ema_cli.sweep.study import load_study
+
+runner = CliRunner()
+METRIC_COLS = [c.edge for c in METRICS]
+DURATION = 0.1  # [s]: short runs keep the suite fast; 10,000 steps of 1e-5 s each
+REAL_KERNEL_CALL = execute.simulate_batch
+
+
+def write_config(tmp_path: Path, **changes) -> Path:
+    """A 0.1 deg step study over the transmission dead band (3 values + the baseline)."""
+    data = {
+        "name": "t",
+        "input": {"kind": "step", "amplitude_deg": 0.1},
+        "simulation": {"duration_s": DURATION, "dt_s": 1e-5, "output_interval_s": 1e-3},
+        "sweep": {"axes": [{"nonlinearity": "deadzone2", "values": [0.001, 0.01, 0.1]}]},
+        "outputs": {"timeseries": True, "figures": []},
+    }
+    for key, value in changes.items():
+        data[key] = value
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def sweep(tmp_path: Path, out: str, cfg_path: Path | None = None, **kw):
+    cfg_path = cfg_path or write_config(tmp_path)
+    kw.setdefault("cache_dir", tmp_path / "cache")
+    return run_sweep(load_study(cfg_path), tmp_path / out, progress=False, **kw)
+
+
+def test_sweep_metrics_equal_ema_simulate(tmp_path):
+    cfg_path = write_config(tmp_path)
+    res = sweep(tmp_path, "sweep", cfg_path, n_jobs=1)
+    table = pd.read_csv(tmp_path / "sweep" / "metrics.csv")
+    assert list(table["label"]) == ["baseline", "deadzone2 = 0.001 deg", "deadzone2 = 0.01 deg",
+                                    "deadzone2 = 0.1 deg"]
+    for i, nl in enumerate([None, "0.001", "0.01", "0.1"]):
+        out = tmp_path / f"sim{i}"
+        args = ["simulate", str(cfg_path), "--out", str(out)]
+        if nl is not None:
+            args += ["--nl", f"deadzone2={nl}"]
+        r = runner.invoke(app, args)
+        assert r.exit_code == 0, r.output
+        sim = pd.read_csv(out / "metrics.csv")
+        # both CSVs are written with %.9g: the same runs give the same text, hence equal floats
+        np.testing.assert_array_equal(table.loc[i, METRIC_COLS].to_numpy(float),
+                                      sim.loc[0, METRIC_COLS].to_numpy(float))
+        ts_sim = pd.read_csv(out / "timeseries.csv")
+        ts_sweep = pd.read_csv(tmp_path / "sweep" / "timeseries" / f"{res.jobs[i].id}.csv")
+        assert list(ts_sweep.columns) == list(ts_sim.columns)
+        assert len(ts_sweep) == 101  # 0.1 s every 1e-3 s (the config's), both ends
+        np.testing.assert_array_equal(ts_sweep.to_numpy(), ts_sim.to_numpy())
+        # and bit for bit in memory, against the library's one-run simulate
+        one = simulate(res.jobs[i].params, res.plan.signal, DURATION, 1e-5, None)
+        np.testing.assert_array_equal(res.metrics.loc[i, METRIC_COLS].to_numpy(float),
+                                      one.metrics_frame().loc[0, METRIC_COLS].to_numpy(float))
+
+
+def test_parallel_backends_equal_serial_bit_for_bit(tmp_path):
+    ref = sweep(tmp_path, "serial", n_jobs=1, cache_dir=tmp_path / "c0")
+    assert ref.backend == "serial" and ref.computed == 4
+    for backend in ("threads", "loky"):
+        res = sweep(tmp_path, backend, n_jobs=2, backend=backend,
+                    cache_dir=tmp_path / f"cache-{backend}")
+        assert res.backend == backend and res.workers == 2 and res.computed == 4
+        np.testing.assert_array_equal(res.metrics[METRIC_COLS].to_numpy(float),
+                                      ref.metrics[METRIC_COLS].to_numpy(float))
+        for i in range(4):
+            np.testing.assert_array_equal(res.signals(i), ref.signals(i))
+
+
+class CountingKernel:
+    """Wraps the kernel call of the executor: counts the runs, fails on the chosen call."""
+
+    def __init__(self, fail_on: int | None = None, exc: BaseException | None = None) -> None:
+        self.real = REAL_KERNEL_CALL
+        self.rows: list[np.ndarray] = []
+        self.fail_on, self.exc, self.calls = fail_on, exc, 0
+
+    def __call__(self, P, refs, ref_index, dt, n_steps, *args, **kw):
+        if n_steps != WARM_STEPS:
+            self.calls += 1
+            if self.calls == self.fail_on:
+                raise self.exc
+            self.rows.extend(np.array(P))
+        return self.real(P, refs, ref_index, dt, n_steps, *args, **kw)
+
+
+def test_interrupted_sweep_resumes_without_recomputing_or_duplicating(tmp_path, monkeypatch):
+    cfg_path = write_config(tmp_path)
+    first = CountingKernel(fail_on=3, exc=KeyboardInterrupt())
+    monkeypatch.setattr(execute, "simulate_batch", first)
+    with pytest.raises(KeyboardInterrupt):  # Ctrl-C during the third chunk of one job each
+        sweep(tmp_path, "run", cfg_path, n_jobs=1, backend="threads",
+              cache_dir=tmp_path / "cache")
+    assert len(first.rows) == 2
+    partial = pd.read_csv(tmp_path / "run" / "metrics.csv")
+    assert list(partial["status"]) == ["ok", "ok", "pending", "pending"]
+    assert json.loads((tmp_path / "run" / "manifest.json").read_text())["status"] == "interrupted"
+
+    again = CountingKernel()
+    monkeypatch.setattr(execute, "simulate_batch", again)
+    res = sweep(tmp_path, "run", cfg_path, n_jobs=1)  # the same --out: resumed in place
+    assert res.cached == 2 and res.computed == 2 and len(again.rows) == 2
+    done_first = {r.tobytes() for r in first.rows}
+    assert not any(r.tobytes() in done_first for r in again.rows)  # nothing computed twice
+    table = pd.read_csv(tmp_path / "run" / "metrics.csv")
+    assert len(table) == 4 and table["job"].is_unique and (table["status"] == "ok").all()
+    sweep(tmp_path, "clean", cfg_path, n_jobs=1, cache_dir=tmp_path / "fresh")
+    np.testing.assert_array_equal(table[METRIC_COLS].to_numpy(float),
+                                  pd.read_csv(tmp_path / "clean" / "metrics.csv")[METRIC_COLS]
+                                  .to_numpy(float))
+    man = json.loads((tmp_path / "run" / "manifest.json").read_text())
+    assert man["status"] == "complete" and man["job_counts"]["cached"] == 2
+
+    # --force recomputes everything; a different sweep may not reuse the folder
+    forced = CountingKernel()
+    monkeypatch.setattr(execute, "simulate_batch", forced)
+    res = sweep(tmp_path, "run", cfg_path, n_jobs=1, force=True)
+    assert res.computed == 4 and len(forced.rows) == 4
+    other = write_config(tmp_path, name="other")
+    r = runner.invoke(app, ["sweep", str(other), "--out", str(tmp_path / "run"),
+                            "--cache-dir", str(tmp_path / "cache"), "--no-progress"])
+    assert r.exit_code == 2 and "holds another run" in r.output
+
+
+def test_exception_in_a_chunk_fails_its_jobs_only_and_a_rerun_finishes(tmp_path, monkeypatch):
+    cfg_path = write_config(tmp_path)
+    monkeypatch.setattr(execute, "simulate_batch",
+                        CountingKernel(fail_on=2, exc=RuntimeError("disk on fire")))
+    r = runner.invoke(app, ["sweep", str(cfg_path), "--n-jobs", "1", "--out",
+                            str(tmp_path / "run"), "--cache-dir", str(tmp_path / "cache"),
+                            "--no-progress"])
+    assert r.exit_code == 1, r.output
+    assert "1 job(s) failed" in r.output and "Traceback" not in r.output
+    man = json.loads((tmp_path / "run" / "manifest.json").read_text())
+    failed = [j for j in man["jobs"] if j["status"] == "failed"]
+    assert len(failed) == 1 and "RuntimeError: disk on fire" in failed[0]["error"]
+    assert man["job_counts"]["ok"] == 3 and man["status"] == "incomplete"
+
+    again = CountingKernel()
+    monkeypatch.setattr(execute, "simulate_batch", again)
+    res = sweep(tmp_path, "run", cfg_path, n_jobs=1)
+    assert res.computed == 1 and len(again.rows) == 1 and res.counts()["ok"] == 4
+
+
+def test_dask_backend_on_a_local_cluster_equals_local(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    ref = sweep(tmp_path, "local", n_jobs=1, cache_dir=tmp_path / "c0")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  protocol="tcp", host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        res = sweep(tmp_path, "dask", backend="dask", scheduler=cluster.scheduler_address,
+                    cache_dir=tmp_path / "c1", chunk_size=1)
+    assert res.backend == "dask" and res.computed == 4 and res.counts()["ok"] == 4
+    np.testing.assert_array_equal(res.metrics[METRIC_COLS].to_numpy(float),
+                                  ref.metrics[METRIC_COLS].to_numpy(float))
+    for i in range(4):
+        np.testing.assert_array_equal(res.signals(i), ref.signals(i))
