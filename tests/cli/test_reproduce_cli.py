@@ -1,0 +1,90 @@
+"""`ema reproduce` end to end on a tiny batch: passing and failing claims, bad input."""
+
+from __future__ import annotations
+
+import pandas as pd
+from typer.testing import CliRunner
+
+from ema_cli.cli.main import app
+
+runner = CliRunner()
+
+STUDY = """name: tiny
+input: {kind: step, amplitude_deg: 0.1}
+simulation: {duration_s: 0.2}
+sweep:
+  axes:
+    - nonlinearity: deadzone2
+      values: [0.001, 0.1]
+"""
+
+EXPERIMENT = """name: tinybatch
+studies:
+  - id: figA
+    config: tiny.yaml
+    figure: figA.png
+    caption: "Figure A: dead band"
+thresholds:
+  - id: band
+    config: tiny.yaml
+    vary: deadzone2
+    range: [1.0e-4, 0.1]
+    require: ["p2p_err_pos_deg<=0.002"]
+    rtol: 0.05
+    percent_of_input: true
+    paper_value: 2.0
+claims:
+  - id: osc
+    paper: p
+    statement: oscillation at 0.1 deg
+    check: {kind: value, study: figA, where: {deadzone2_deg: 0.1}, metric: p2p_err_pos_deg,
+            op: ">", value: LIMIT}
+  - id: band_small
+    paper: p
+    statement: threshold below 2 %
+    check: {kind: scalar, name: band, op: "<", value: 2.0}
+"""
+
+
+def _write(tmp_path, limit: float):
+    (tmp_path / "tiny.yaml").write_text(STUDY)
+    exp = tmp_path / "exp.yaml"
+    exp.write_text(EXPERIMENT.replace("LIMIT", str(limit)))
+    return exp
+
+
+def test_reproduce_passes_and_writes_report(tmp_path):
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["reproduce", str(_write(tmp_path, 0.002)), "--out", str(out),
+                            "--n-jobs", "1"])
+    assert r.exit_code == 0, r.output
+    claims = pd.read_csv(out / "claims.csv")
+    assert claims["result"].tolist() == ["PASS", "PASS"]
+    report = (out / "REPORT.md").read_text()
+    assert "**2 of 2 claims PASS**" in report and "![figA](figA.png)" in report
+    assert (out / "figA.png").stat().st_size > 10_000
+    assert (out / "threshold_band.png").is_file()
+    thr = pd.read_csv(out / "thresholds.csv")
+    assert 0 < thr["value"][0] < 2.0  # % of the 0.1 deg input
+
+
+def test_reproduce_exits_1_when_a_claim_fails(tmp_path):
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["reproduce", str(_write(tmp_path, 1e6)), "--out", str(out),
+                            "--n-jobs", "1"])
+    assert r.exit_code == 1
+    claims = pd.read_csv(out / "claims.csv")
+    assert claims.set_index("id")["result"]["osc"] == "FAIL"
+    assert "FAIL" in (out / "REPORT.md").read_text()
+
+
+def test_reproduce_bad_experiment_is_clear(tmp_path):
+    exp = tmp_path / "exp.yaml"
+    exp.write_text("name: x\nstudies:\n  - id: a\n    config: missing.yaml\n    figure: a.png\n"
+                   "    caption: c\n")
+    r = runner.invoke(app, ["reproduce", str(exp)])
+    assert r.exit_code == 2 and "missing.yaml" in r.output and "does not exist" in r.output
+    exp.write_text("name: x\nstudies: []\nbogus: 1\n")
+    r = runner.invoke(app, ["reproduce", str(exp)])
+    assert r.exit_code == 2 and "bogus: unknown key" in r.output
+    assert "Traceback" not in r.output
