@@ -68,11 +68,11 @@ def summary_table(result: SweepResult) -> Table:
     table.add_column("swept values", max_width=LABEL_WIDTH, overflow="fold")
     table.add_column("status", no_wrap=True)
     for m in metrics:
-        table.add_column(metric_label(m), justify="right", min_width=METRIC_WIDTH)
+        table.add_column(escape(metric_label(m)), justify="right", min_width=METRIC_WIDTH)
     shown = df if len(df) <= MAX_TABLE_ROWS else df.head(MAX_TABLE_ROWS)
     for _, row in shown.iterrows():
         style = "red" if row["status"] == FAILED else None
-        table.add_row(row["job"], row["label"], row["status"],
+        table.add_row(row["job"], escape(str(row["label"])), row["status"],
                       *[fmt(float(row[m])) if row[m] == row[m] else "n/a" for m in metrics],
                       style=style)
     if len(df) > MAX_TABLE_ROWS:
@@ -153,7 +153,8 @@ def show_cmd(
     """Print the resolved config (every default filled in) and the jobs it expands to."""
     cfg, _ = _load(config, set_)
     plan = plan_sweep(cfg, config.parent, str(config))
-    console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip())
+    console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip(),
+                  markup=False)
     table = Table(title=f"{len(plan.jobs)} jobs ({plan.n_unique} distinct runs); input "
                         f"{plan.signal.describe()}, {plan.duration:g} s at dt {plan.dt:g} s",
                   header_style="bold")
@@ -161,12 +162,13 @@ def show_cmd(
         table.add_column(col)
     jobs = plan.jobs if all_ else plan.jobs[:MAX_SHOW_JOBS]
     for j in jobs:
-        table.add_row(j.id, j.label, j.key)
+        table.add_row(j.id, escape(j.label), j.key)
     if len(jobs) < len(plan.jobs):
         table.caption = f"first {len(jobs)} of {len(plan.jobs)}; --all lists every job"
     console.print(table)
     for info in plan.axes:
-        console.print(f"axis {info.name}: {info.description}; columns {', '.join(info.columns)}")
+        console.print(f"axis {info.name}: {info.description}; columns "
+                      f"{', '.join(info.columns)}", markup=False)
     for key, v in plan.scales.items():
         console.print(f"relative scale {key}: {v:.6g} (baseline peak)")
     for n in plan.notes:

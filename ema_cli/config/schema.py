@@ -194,7 +194,9 @@ class SweepAxis(Strict):
 
     Values come from exactly one of ``values``, ``linspace`` or ``logspace``. With
     ``relative: true`` (dead zones only) the values are percent of the peak of the signal the
-    dead zone acts on, measured in the baseline run (see the README).
+    dead zone acts on, measured in the baseline run: the voltage demand (amplifier), the motor
+    speed (speed sensor) and the input signal's amplitude (position sensor, transmission);
+    see ``ema_cli.sweep.plan._relative_scales``.
     """
 
     name: str | None = Field(

@@ -21,6 +21,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 LOG_Y_DECADES = 2.0  # a metric spanning at least this many decades (all > 0) gets a log y axis
 TAIL_FRACTION = 0.2  # the zoom panels show the last 20 % of the run (residual oscillation)
+MARKER_MAX_POINTS = 40  # lines with more points than this get small dots, not circles
 METRIC_COLUMNS = 4  # metric-vs-magnitude subplots per row
 LEGEND_SPACE = 0.84  # metric plots: fraction of the width left of the legend
 X_MARGIN = 0.05  # x-axis margin of metric plots, fraction of the range
@@ -120,7 +121,8 @@ def metric_figure(frame: pd.DataFrame, x_column: str, x_label: str,
             x = pd.to_numeric(sub[x_column], errors="coerce").to_numpy(float)
             y = sub[col].to_numpy(float)
             all_y.append(y)
-            ax.plot(x, y, "o-", color=f"C{k % 10}", ms=4, lw=1.3,
+            ax.plot(x, y, "o-" if len(x) <= MARKER_MAX_POINTS else ".-", color=f"C{k % 10}",
+                    ms=4 if len(x) <= MARKER_MAX_POINTS else 2, lw=1.3,
                     label=None if name is None else str(name))
         n_nan = int(sum(np.isnan(y).sum() for y in all_y))
         if 0 < n_nan < sum(y.size for y in all_y):

@@ -177,7 +177,8 @@ def run_sweep(
     cfg        validated StudyConfig (``load_config(path, overrides, StudyConfig)``)
     out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
                reused only if it holds an earlier run of the same sweep (resume in place).
-    n_jobs     workers; None: ``cfg.parallel.n_jobs`` (None there: all cores)
+    n_jobs     workers; None: ``cfg.parallel.n_jobs`` (None there: all cores); the dask
+               backend uses every thread of the cluster instead
     backend    auto | loky | threads | dask; None: ``cfg.parallel.backend``
     force      recompute every job even if it is cached
     progress   show a progress bar with ETA on stderr
@@ -241,9 +242,13 @@ def run_sweep(
     first = {key: idxs[0] for key, idxs in by_key.items()}
     chunks = [plan.P([plan.jobs[first[k]] for k in keys]) for keys in chunk_keys]
     done_chunks: set[int] = set()
+    computed = 0
     timings.update(warm=0.0, execute=0.0, kernel=0.0, store=0.0)
+    label = f"{cfg.name}: {len(pending)} to run, {cached} cached"
+    bar = _Progress(sum(len(by_key[k]) for k in pending), progress, label)
 
     def on_chunk(i: int, res: ChunkOutput) -> None:
+        nonlocal computed
         ts = time.perf_counter()
         keys = chunk_keys[i]
         if res.error is not None or res.metrics is None:
@@ -255,15 +260,15 @@ def run_sweep(
             cache.store(keys, res.metrics, res.signals, plan.dec)
             for r, key in enumerate(keys):
                 finish(key, res.metrics[r])
+            computed += len(keys)
         done_chunks.add(i)
         timings["kernel"] += res.kernel_s
         timings["store"] += time.perf_counter() - ts
         bar.advance(sum(len(by_key[k]) for k in keys))
 
     interrupted = aborted = False
-    label = f"{cfg.name}: {len(pending)} to run, {cached} cached"
     try:
-        with _Progress(sum(len(by_key[k]) for k in pending), progress, label) as bar:
+        with bar:
             if chunks and backend != "dask":
                 timings["warm"] = warm_kernel(plan.signal, plan.dt, 1)  # the prange kernel
             t1 = time.perf_counter()
@@ -287,7 +292,6 @@ def run_sweep(
         aborted = True
         raise
     finally:
-        computed = sum(len(k) for i, k in enumerate(chunk_keys) if i in done_chunks)
         result = SweepResult(plan, metrics_frame(plan, metrics, status, errors), folder, cache,
                              backend, workers, computed=computed, cached=cached,
                              interrupted=interrupted, timings=timings)

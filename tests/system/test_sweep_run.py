@@ -156,6 +156,7 @@ def test_exception_in_a_chunk_fails_its_jobs_only_and_a_rerun_finishes(tmp_path,
     failed = [j for j in man["jobs"] if j["status"] == "failed"]
     assert len(failed) == 1 and "RuntimeError: disk on fire" in failed[0]["error"]
     assert man["job_counts"]["ok"] == 3 and man["status"] == "incomplete"
+    assert man["job_counts"]["computed"] == 3  # the failed chunk is not counted as computed
 
     again = CountingKernel()
     monkeypatch.setattr(execute, "simulate_batch", again)
@@ -163,11 +164,12 @@ def test_exception_in_a_chunk_fails_its_jobs_only_and_a_rerun_finishes(tmp_path,
     assert res.computed == 1 and len(again.rows) == 1 and res.counts()["ok"] == 4
 
 
-def test_dask_backend_on_a_local_cluster_equals_local(tmp_path):
+@pytest.mark.parametrize("processes", [False, True])
+def test_dask_backend_on_a_local_cluster_equals_local(tmp_path, processes):
     distributed = pytest.importorskip("dask.distributed")
     ref = sweep(tmp_path, "local", n_jobs=1, cache_dir=tmp_path / "c0")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                                  protocol="tcp", host="127.0.0.1",
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=processes,
+                                  protocol="tcp", host="127.0.0.1",  # loopback only
                                   dashboard_address=None) as cluster:
         res = sweep(tmp_path, "dask", backend="dask", scheduler=cluster.scheduler_address,
                     cache_dir=tmp_path / "c1", chunk_size=1)
