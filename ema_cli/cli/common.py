@@ -9,6 +9,7 @@ from typing import Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from ema_cli.errors import EmaError
 
@@ -19,14 +20,17 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def handle_errors(fn: F) -> F:
-    """Turn EmaError (and Ctrl-C) into one clear message and an exit code, never a traceback."""
+    """Turn EmaError (and Ctrl-C) into one clear message and an exit code, never a traceback.
+
+    The message is printed literally (escaped), so ``[dask]`` or ``[deg]`` survive rich markup.
+    """
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return fn(*args, **kwargs)
         except EmaError as exc:
-            err_console.print(f"[bold red]error:[/] {exc.message}")
+            err_console.print(f"[bold red]error:[/] {escape(exc.message)}")
             raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt:
             err_console.print("[yellow]interrupted[/]: finished work was kept")

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated
 
 import typer
 import yaml
@@ -27,27 +25,11 @@ LABEL_WIDTH = 30  # widest "swept values" column of the terminal table [characte
 METRIC_WIDTH = 7  # narrowest metric column of the terminal table [characters]
 MAX_SHOW_JOBS = 50  # jobs listed by `ema show` unless --all
 
-F = TypeVar("F", bound=Callable[..., Any])
 ConfigArg = Annotated[Path, typer.Argument(help="YAML study config, e.g. configs/deadzone2.yaml.")]
 SetOpt = Annotated[list[str] | None, typer.Option(
     "--set", help="Override a config value by dotted path (list items by index), e.g. "
                   "plant.Kpp=60, sweep.axes.0.values=[0.01,0.1], outputs.timeseries=false; "
                   "repeatable.")]
-
-
-def literal_errors(fn: F) -> F:
-    """Print an EmaError's message literally (rich would take ``[dask]`` or ``[deg]`` for
-    markup and drop it), then exit with its code; ``handle_errors`` handles the rest."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except EmaError as exc:
-            err_console.print(f"[bold red]error:[/] {escape(exc.message)}")
-            raise typer.Exit(exc.exit_code) from None
-
-    return wrapper  # type: ignore[return-value]
 
 
 def _load(config: Path, set_: list[str] | None):
@@ -82,7 +64,6 @@ def summary_table(result: SweepResult) -> Table:
 
 @app.command("sweep")
 @handle_errors
-@literal_errors
 def sweep_cmd(
     config: ConfigArg,
     set_: SetOpt = None,
@@ -131,7 +112,6 @@ def sweep_cmd(
 
 @app.command("validate")
 @handle_errors
-@literal_errors
 def validate_cmd(config: ConfigArg, set_: SetOpt = None) -> None:
     """Check CONFIG against the schema (fast: nothing is simulated) and count its jobs."""
     cfg, _ = _load(config, set_)
@@ -143,7 +123,6 @@ def validate_cmd(config: ConfigArg, set_: SetOpt = None) -> None:
 
 @app.command("show")
 @handle_errors
-@literal_errors
 def show_cmd(
     config: ConfigArg,
     set_: SetOpt = None,
