@@ -24,12 +24,18 @@ Numerics
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
+from numba.core.errors import NumbaPerformanceWarning
 
 from ema_cli._numba import njit, prange
 from ema_cli.model.params import INDEX
 from ema_cli.sim.tables import MET, N_METRICS, SIG
+
+# "parallel=True but no parallel transformation": expected for simulate_case_nb (see there)
+warnings.filterwarnings("ignore", category=NumbaPerformanceWarning,
+                        message="(?s).*'parallel=True' was specified but no transformation")
 
 # parameter columns (compile-time constants for numba)
 _R, _L, _KT, _KE = INDEX["R"], INDEX["L"], INDEX["Kt"], INDEX["Ke"]
@@ -175,7 +181,11 @@ def _bristle_step(p, z, w, dt):
     return z_new, p[_SIG0] * z_mean + p[_SIG1] * (z_new - z) / dt
 
 
-@njit(cache=True)
+# Compiled through numba's parallel pipeline although the function has no prange: its extra
+# optimisation passes make this loop about 2x faster (measured: 4.7 vs 10.1 ms per 100,000
+# steps, bit-identical results). With no parallel loop inside, it runs on the calling thread
+# and never enters numba's threading layer, so it is safe to call from several threads.
+@njit(cache=True, parallel=True)
 def simulate_case_nb(p, ref_pos, ref_vel, step_info, dt, n_steps, dec, sig, met):
     """Integrate one configuration ``p`` for ``n_steps`` steps of ``dt`` [s].
 
