@@ -8,7 +8,6 @@ correctness, this script measures speed.
 from __future__ import annotations
 
 import importlib.util
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -20,21 +19,11 @@ from scipy.integrate import solve_ivp
 from ema_cli.model.params import resolve, to_row
 from ema_cli.sim.runner import plan_steps, simulate_batch
 from ema_cli.sim.signals import InputSignal, sample
+from ema_cli.timing import median_time
 from ema_cli.units import DEG
 
 REPEATS = 5
 LINEAR = {"sat1": "off", "sat2": "off", "sat3": "off", "alpha": 0.0, "friction": 0}
-
-
-def median_time(fn, repeats: int = REPEATS) -> float:
-    """Median wall time of ``fn()`` over ``repeats`` calls after one warm-up call [s]."""
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def kernel_throughput() -> None:

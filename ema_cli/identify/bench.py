@@ -7,10 +7,7 @@ the exact solver < 50 ms.
 
 from __future__ import annotations
 
-import statistics
-import time
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
@@ -18,21 +15,11 @@ from ema_cli.identify.exact import solve_exact
 from ema_cli.identify.ga import preset, run_ga
 from ema_cli.identify.run import build_problem, load_data, run_identification
 from ema_cli.identify.settings import IdentifySettings
+from ema_cli.timing import median_time
 
 REPEATS = 5  # timed repeats after one warm-up call [-]
 GA_TARGET_S = 0.5  # the issue's target for one GA run at the paper's budget [s]
 EXACT_TARGET_S = 0.05  # the issue's target for the exact solver [s]
-
-
-def median_time(fn: Callable[[], Any], repeats: int = REPEATS) -> float:
-    """Median wall time of ``fn()`` over ``repeats`` calls after one warm-up call [s]."""
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def bench_identify(log: Callable[[str], None] = print) -> dict[str, float]:
