@@ -24,18 +24,12 @@ Numerics
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
-from numba.core.errors import NumbaPerformanceWarning
 
 from ema_cli._numba import njit, prange
 from ema_cli.model.params import INDEX
 from ema_cli.sim.tables import MET, N_METRICS, SIG
-
-# "parallel=True but no parallel transformation": expected for simulate_case_nb (see there)
-warnings.filterwarnings("ignore", category=NumbaPerformanceWarning,
-                        message="(?s).*'parallel=True' was specified but no transformation")
 
 # parameter columns (compile-time constants for numba)
 _R, _L, _KT, _KE = INDEX["R"], INDEX["L"], INDEX["Kt"], INDEX["Ke"]
