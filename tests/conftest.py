@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
@@ -29,6 +27,3 @@ def run_rows(rows, signal=None, duration=0.2, dt=1e-5, output_interval=None, par
     P = np.array([to_row(r) if isinstance(r, dict) else r for r in rows])
     return simulate_batch(P, [ref], None, dt, n_steps, dec, parallel=parallel)
 
-
-def finite(x: float) -> bool:
-    return math.isfinite(x)

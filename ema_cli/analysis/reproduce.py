@@ -168,10 +168,10 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
         rep.timings["identification"] = time.perf_counter() - t0
     if exp.ranking is not None:
         rep.ranking = compute_ranking(rep)
-        first = str(rep.ranking["study"].iloc[0])
-        rep.scalars["ranking.paper_first_rank"] = float(
-            rep.ranking.index[rep.ranking["study"] == exp.ranking.paper_first][0] + 1
-        ) if exp.ranking.paper_first in set(rep.ranking["study"]) else math.nan
-        rep.scalars["ranking.first_is_paper_first"] = float(first == exp.ranking.paper_first)
+        order = [str(s) for s in rep.ranking["study"]]
+        named = exp.ranking.paper_first
+        rep.scalars["ranking.paper_first_rank"] = (
+            float(order.index(named) + 1) if named in order else math.nan)
+        rep.scalars["ranking.first_is_paper_first"] = float(order[0] == named)
     rep.verdicts = evaluate_claims(exp.claims, rep.studies, rep.scalars)
     return rep

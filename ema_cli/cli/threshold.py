@@ -62,8 +62,6 @@ def threshold_cmd(
         crit = Criterion(metric, "<=", limit)
         crit.check()
         criteria.insert(0, crit)
-    if direction not in ("max", "min"):
-        raise EmaError(f"--direction must be max or min, got {direction!r}")
     pl = lookup(vary)
     cfg = load_config(config, parse_assignments(set_, "--set"), model=StudyConfig)
     signal = input_signal(cfg.input, config.parent)

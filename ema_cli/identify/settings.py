@@ -9,7 +9,14 @@ from __future__ import annotations
 import math
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from ema_cli.identify import ga as ga_mod
 from ema_cli.identify.data import CSV_COLUMNS
@@ -132,20 +139,10 @@ class IdentifySettings(Strict):
     ga: GASettings = Field(default_factory=GASettings)
     synthetic: SyntheticSettings = Field(default_factory=SyntheticSettings)
 
-    @field_validator("k_range")
+    @field_validator("k_range", "alpha_range", "c_range")
     @classmethod
-    def _k(cls, v: tuple[float, float]) -> tuple[float, float]:
-        return _check_range(v, "k_range")
-
-    @field_validator("alpha_range")
-    @classmethod
-    def _a(cls, v: tuple[float, float]) -> tuple[float, float]:
-        return _check_range(v, "alpha_range")
-
-    @field_validator("c_range")
-    @classmethod
-    def _c(cls, v: tuple[float, float]) -> tuple[float, float]:
-        return _check_range(v, "c_range")
+    def _ranges(cls, v: tuple[float, float], info: ValidationInfo) -> tuple[float, float]:
+        return _check_range(v, info.field_name or "range")
 
     @field_validator("columns")
     @classmethod

@@ -50,7 +50,7 @@ def study_figure(rep: Reproduction, spec: StudySpec):
     fig = overlay_figure(series, spec.caption, columns=("theta_load_deg", "omega_load_deg_s"),
                          ylabels=("load angle [deg]", "load speed [deg/s]"))
     ts = series[0][1]
-    ax_pos, ax_vel = fig.axes
+    ax_pos = fig.axes[0]
     ax_pos.plot(ts["t_s"], ts["theta_ref_deg"], "k:", lw=1, label="reference")
     ax_pos.legend(fontsize=8, loc="best")
     return fig

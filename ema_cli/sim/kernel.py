@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ema_cli._numba import njit, prange
 from ema_cli.model.params import INDEX
 from ema_cli.sim.tables import MET, N_METRICS, SIG
@@ -384,7 +382,3 @@ def simulate_batch_parallel_nb(P, ref_pos, ref_vel, step_info, ref_index, dt, n_
         simulate_case_nb(P[c], ref_pos[q], ref_vel[q], step_info[q], dt, n_steps, dec,
                          sig[c], met[c])
 
-
-def empty_signals(n_cases: int, n_out: int, n_signals: int) -> np.ndarray:
-    """Allocate the signal buffer sig[n_cases, n_out, n_signals] (NaN-filled)."""
-    return np.full((n_cases, n_out, n_signals), np.nan)

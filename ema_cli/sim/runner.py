@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from ema_cli.errors import EmaError
-from ema_cli.model.params import INDEX, N_PARAMS, equivalent_inertia, to_row
+from ema_cli.model.params import N_PARAMS, equivalent_inertia, to_row
 from ema_cli.sim.kernel import simulate_batch_nb, simulate_batch_parallel_nb
 from ema_cli.sim.signals import InputSignal, Reference, sample
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
@@ -160,7 +160,3 @@ def simulate(
     P = np.array([to_row(params)])
     return simulate_batch(P, [ref], None, dt, n_steps, dec)
 
-
-def param_column(P: np.ndarray, name: str) -> np.ndarray:
-    """One named column of a parameter matrix."""
-    return P[:, INDEX[name]]
