@@ -1,13 +1,91 @@
-"""The one place numba is imported from (set NUMBA_DISABLE_JIT=1 to debug kernels in Python)."""
+"""The one place numba is imported from, with a compiled-code cache that cannot go stale.
 
+numba's ``cache=True`` only notices edits to the file that defines a jitted function, but our
+kernels inline the model's equations and bake the parameter, state and signal table indices into
+the machine code. So the cache lives in a folder keyed on a hash of every source the compiled
+code can read (:func:`source_key`): ``_numba.py``, ``units.py``, every module of ``model/`` and
+``sim/``, and every module that imports this one (the modules that define compiled code). Any
+edit to any of them selects a new, empty folder and everything is compiled afresh.
+
+The cache root is ``$EMA_CACHE_DIR``, else ``$NUMBA_CACHE_DIR``, else ``$XDG_CACHE_HOME/ema``
+(``~/.cache/ema``); an unwritable root falls back to the temporary folder. Set
+``NUMBA_DISABLE_JIT=1`` to run the kernels as plain Python for debugging.
+"""
+
+from __future__ import annotations
+
+import hashlib
 import os
+import shutil
+import tempfile
+from pathlib import Path
 
-from numba import config, njit, prange
+PACKAGE = Path(__file__).resolve().parent
+KEYED_FOLDERS = ("model", "sim")  # every module in these is read by the compiled kernels
+KEYED_FILES = ("_numba.py", "units.py")
+KEEP_CACHES = 6  # cache folders of other source versions kept (most recent first) [-]
+JIT_IMPORT = "ema_cli._numba"
+
+
+def keyed_sources(package: Path = PACKAGE) -> list[Path]:
+    """The source files the compiled code depends on, sorted (see the module docstring)."""
+    files = {package / f for f in KEYED_FILES}
+    for folder in KEYED_FOLDERS:
+        files.update((package / folder).glob("*.py"))
+    for f in package.rglob("*.py"):
+        if JIT_IMPORT in f.read_text(encoding="utf-8"):
+            files.add(f)
+    return sorted(f for f in files if f.is_file())
+
+
+def source_key(package: Path = PACKAGE) -> str:
+    """A short hash of the contents (and relative paths) of :func:`keyed_sources`."""
+    h = hashlib.sha256()
+    for f in keyed_sources(package):
+        h.update(f.relative_to(package).as_posix().encode())
+        h.update(b"\0")
+        h.update(f.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def cache_root() -> Path:
+    """The folder holding one cache folder per source key."""
+    for var in ("EMA_CACHE_DIR", "NUMBA_CACHE_DIR"):
+        if os.environ.get(var):
+            return Path(os.environ[var]).expanduser() / "ema-kernels"
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base).expanduser() / "ema" / "kernels"
+
+
+def _prepare(root: Path, key: str) -> Path:
+    folder = root / key
+    if not folder.is_dir():
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            root = Path(tempfile.gettempdir()) / f"ema-kernels-{os.getuid()}"
+            folder = root / key
+            folder.mkdir(parents=True, exist_ok=True)
+        others = sorted((d for d in root.iterdir() if d.is_dir() and d.name != key),
+                        key=lambda d: d.stat().st_mtime, reverse=True)
+        for old in others[KEEP_CACHES:]:
+            shutil.rmtree(old, ignore_errors=True)
+    return folder
+
+
+CACHE_KEY = source_key()
+"""The key of the sources this process runs; the compiled code is cached under it."""
+
+from numba import config, njit, prange  # noqa: E402  (after the key: config must be set first)
+
+config.CACHE_DIR = str(_prepare(cache_root(), CACHE_KEY))
 
 if "NUMBA_DISABLE_PERFORMANCE_WARNINGS" not in os.environ:
-    # sim.kernel.simulate_case_nb is compiled with parallel=True but has no prange, on purpose
-    # (2x faster, see there); numba's "no transformation for parallel execution" advice is
-    # expected. Set the variable yourself to see numba's performance warnings again.
+    # the per-chunk kernels are compiled with parallel=True but have no prange, on purpose
+    # (numba's parallel pipeline optimises them better, see sim/kernel.py); numba's "no
+    # transformation for parallel execution" advice is expected. Set the variable yourself to see
+    # numba's performance warnings again.
     config.DISABLE_PERFORMANCE_WARNINGS = 1
 
-__all__ = ["njit", "prange"]
+__all__ = ["CACHE_KEY", "njit", "prange", "source_key"]

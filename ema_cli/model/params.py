@@ -75,7 +75,19 @@ PARAMS: tuple[Param, ...] = (
     Param("sigma0", "N*m/rad", None, "bristle stiffness; default 1e3*Fc"),
     Param("sigma1", "N*m*s/rad", None, "bristle damping; default 2*0.5*sqrt(sigma0*Jm)"),
     Param("sigma2", "N*m*s/rad", 0.0, "viscous friction coefficient (the paper's friction1)"),
+    # external load on the output (config section `load`)
+    Param("T_load", "N*m", 0.0, "constant external torque on the load, + along +theta_L",
+          nonnegative=False),
+    Param("k_h", "N*m/rad", 0.0, "hinge-moment gradient: external torque -k_h*theta_L",
+          nonnegative=False),
+    Param("locked", "-", 0.0, "motor shaft held fixed, controller and armature off: 0 no, 1 yes"),
+    # digital controller and sensors (config sections `controller`, `sensors`)
+    Param("Ts", "s", 0.0, "controller sample time (0: continuous); a whole multiple of dt"),
+    Param("q_pos", "rad", 0.0, "position sensor quantum, 2*pi/counts per rev (0: none)"),
+    Param("q_speed", "rad/s", 0.0, "speed sensor resolution (0: none)"),
 )
+FLAGS = ("friction", "locked")
+"""0/1 parameters: accept off/on, false/true, 0/1."""
 
 INDEX: dict[str, int] = {p.name: i for i, p in enumerate(PARAMS)}
 """Column of each parameter in the parameter matrix P[n_cases, N_PARAMS]."""
@@ -102,13 +114,13 @@ def check_value(name: str, value: object) -> float:
         if isinstance(value, str) and value in spec.choices:
             return spec.choices[value]
         raise EmaError(f"parameter '{name}' must be one of {sorted(spec.choices)}, got {value!r}")
-    if isinstance(value, str) and value.strip().lower() in ("off", "inf", "none"):
+    if isinstance(value, str) and value.strip().lower() in ("off", "inf", "none", "false"):
         if name.startswith("sat"):
             return math.inf
-        if name == "friction":
+        if name in FLAGS:
             return 0.0
         raise EmaError(f"parameter '{name}' cannot be '{value}'; expected a number in {spec.unit}")
-    if isinstance(value, str) and value.strip().lower() == "on" and name == "friction":
+    if isinstance(value, str) and value.strip().lower() in ("on", "true") and name in FLAGS:
         return 1.0
     if isinstance(value, bool):
         value = float(value)
@@ -147,8 +159,9 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
         values["sigma1"] = 2.0 * BRISTLE_DAMPING_RATIO * math.sqrt(values["sigma0"] * values["Jm"])  # type: ignore[operator]
     if values["c"] is None:
         values["c"] = 2.0 * values["zeta_t"] * math.sqrt(values["kL"] * equivalent_inertia(values))  # type: ignore[arg-type,operator]
-    if values["friction"] not in (0.0, 1.0):
-        raise EmaError(f"parameter 'friction' must be 0/off or 1/on, got {values['friction']}")
+    for flag in FLAGS:
+        if values[flag] not in (0.0, 1.0):
+            raise EmaError(f"parameter '{flag}' must be 0/off or 1/on, got {values[flag]}")
     if values["friction"] == 1.0 and (values["Fc"] <= 0 or values["vs"] <= 0):  # type: ignore[operator]
         raise EmaError("LuGre friction needs Fc > 0 and vs > 0")
     return {k: float(v) for k, v in values.items()}  # type: ignore[arg-type]

@@ -1,35 +1,57 @@
-"""The batched fixed-step kernel of the reference EMA (numba): RK4 + exact LuGre bristle update.
+"""The batched fixed-step kernel (numba): RK4 across SIMD lanes, exact LuGre bristle update.
 
-States ``x = [theta_m, w_m, i, theta_L, w_L, z, xI]`` (MODEL.md §2). Each configuration is one row
-of the parameter matrix ``P[n_cases, N_PARAMS]`` (column order: ``ema_cli.model.params.PARAMS``).
-The kernel integrates every row independently, accumulates the tracking-error metrics online at
-full resolution (every step, trapezoid rule) and, when asked, records the signals of
-``ema_cli.sim.tables.SIGNALS`` every ``dec`` steps.
+The model's equations live in ``ema_cli.model`` (plant, controller, transmission, LuGre,
+elements); this module only integrates them, records the signals and accumulates the metrics.
+
+Layout
+------
+A batch ``P[n_cases, N_PARAMS]`` (columns: ``model.params.PARAMS``) is cut into chunks of up to
+``lanes`` configurations. A chunk is advanced *together*: its parameters, states and metric
+accumulators are held as ``[quantity, lane]`` arrays (structure of arrays, the lane axis
+innermost) and every time step is one loop over the lanes whose body is branch-free (selects,
+``min``/``max``, the ``model.vmath`` functions), so the compiler vectorises it (AVX-512: 8 lanes
+per instruction). Chunks are spread over the cores with ``prange``. One configuration is a chunk
+of one lane: the same code, so a batch equals its single runs bit for bit, and the serial and the
+parallel entry points give identical results (no fast-math, no reassociation).
 
 Numerics
 --------
-* RK4 for ``theta_m, w_m, i, theta_L, w_L, xI`` with the reference evaluated at the stage times.
-* The LuGre bristle state is stiff (eigenvalue ``-sigma0*|w|/g(w)``, ~ -3e5 1/s at 20 deg step
-  speeds): it is advanced with the exact solution for ``w`` frozen over the step,
-  ``z+ = z_ss + (z - z_ss)*exp(-a*dt)``, ``a = sigma0*|w|/g(w)``, ``z_ss = w/a``, and the
-  bristle torque ``sigma0*mean(z) + sigma1*(z+ - z)/dt`` (exact step averages) is held over the
-  RK4 stages. The viscous part ``sigma2*w_m`` is smooth and is evaluated at every stage (more
-  accurate than holding it; this is our one departure from MODEL.md §5, see the README).
+* RK4 for ``theta_m, w_m, i, theta_L, w_L, xI`` with the reference and the load-torque profile
+  sampled at the stage times (half steps).
+* The LuGre bristle state is advanced with the exact solution for the motor speed frozen over
+  the step and its torque (exact step averages) held over the RK4 stages; the viscous part
+  ``sigma2*w_m`` is evaluated at every stage (``model.lugre``).
 * Current limit: ``di/dt = 0`` while ``|i| >= sat3`` and pushing outward; ``i`` is clamped to
   ``+-sat3`` after each step. Clamping anti-windup on the speed PI while SAT2 is active.
-* A non-finite state or one past the runaway bounds marks the row diverged: its metrics are NaN
-  except ``diverged = 1`` and ``t_end``; its later samples are NaN. Other rows are unaffected.
+* Digital controller (``Ts > 0``, a whole number ``Ts/dt`` of steps): the cascade is evaluated
+  at the sample instants from the state there, the voltage demand is held until the next one and
+  the integral advances by forward Euler; between samples the integral has no rate.
+* Locked motor: ``theta_m, w_m, i, xI`` keep their initial 0 (controller and armature off).
+* A non-finite state or one past the runaway bounds marks the lane diverged: its metrics are NaN
+  except ``diverged = 1`` and ``t_end``; its later samples are NaN. Other lanes are unaffected.
 """
 
 from __future__ import annotations
 
-import math
+import numpy as np
 
 from ema_cli._numba import njit, prange
-from ema_cli.model.params import INDEX
-from ema_cli.sim.tables import MET, N_METRICS, SIG
+from ema_cli.model.controller import cascade_nb, integral_rate_nb, integral_update_nb, sensors_nb
+from ema_cli.model.elements import dead_zone_nb
+from ema_cli.model.lugre import bristle_step_nb
+from ema_cli.model.params import INDEX, N_PARAMS
+from ema_cli.model.plant import (
+    N_STATES,
+    STATE_INDEX,
+    armature_rate_nb,
+    load_accel_nb,
+    load_torque_nb,
+    motor_accel_nb,
+)
+from ema_cli.model.transmission import shaft_torque_nb
+from ema_cli.sim.tables import MET, N_METRICS, N_SIGNALS, SIG
 
-# parameter columns (compile-time constants for numba)
+# parameter rows of a chunk's parameter block W[N_PARAMS, lanes]
 _R, _L, _KT, _KE = INDEX["R"], INDEX["L"], INDEX["Kt"], INDEX["Ke"]
 _JM, _BM, _M, _JL, _BL = INDEX["Jm"], INDEX["bm"], INDEX["m"], INDEX["JL"], INDEX["bL"]
 _KL, _C, _ALPHA, _DAMP = INDEX["kL"], INDEX["c"], INDEX["alpha"], INDEX["damping"]
@@ -38,15 +60,32 @@ _SAT1, _SAT2, _SAT3 = INDEX["sat1"], INDEX["sat2"], INDEX["sat3"]
 _D1, _D3, _D4 = INDEX["d1"], INDEX["d3"], INDEX["d4"]
 _FRIC, _FC, _FS, _VS, _DELTA = (INDEX[k] for k in ("friction", "Fc", "Fs", "vs", "delta"))
 _SIG0, _SIG1, _SIG2 = INDEX["sigma0"], INDEX["sigma1"], INDEX["sigma2"]
+_TLOAD, _KH, _LOCKED = INDEX["T_load"], INDEX["k_h"], INDEX["locked"]
+_TS, _QPOS, _QSPEED = INDEX["Ts"], INDEX["q_pos"], INDEX["q_speed"]
 
-# signal and metric columns
-_S_REF, _S_TH, _S_THM = SIG["theta_ref"], SIG["theta_load"], SIG["theta_motor"]
-_S_WREF, _S_WL, _S_WM = SIG["omega_ref"], SIG["omega_load"], SIG["omega_motor"]
-_S_I, _S_U, _S_UA = SIG["current"], SIG["voltage_cmd"], SIG["voltage_amp"]
-_S_T, _S_TF = SIG["torque_shaft"], SIG["torque_friction"]
-_S_E, _S_EV = SIG["err_pos"], SIG["err_vel"]
-_S_DTH, _S_DW, _S_Z = SIG["dtheta"], SIG["domega"], SIG["bristle_z"]
+# state rows of W[N_STATES, lanes]
+_X_THM, _X_WM, _X_I = STATE_INDEX["theta_m"], STATE_INDEX["w_m"], STATE_INDEX["i"]
+_X_THL, _X_WL = STATE_INDEX["theta_L"], STATE_INDEX["w_L"]
+_X_Z, _X_XI = STATE_INDEX["z"], STATE_INDEX["xI"]
 
+# signal columns of REC / sig and metric columns of met
+_S_BRISTLE_Z = SIG["bristle_z"]
+_S_CURRENT = SIG["current"]
+_S_DOMEGA = SIG["domega"]
+_S_DTHETA = SIG["dtheta"]
+_S_ERR_POS = SIG["err_pos"]
+_S_ERR_VEL = SIG["err_vel"]
+_S_OMEGA_LOAD = SIG["omega_load"]
+_S_OMEGA_MOTOR = SIG["omega_motor"]
+_S_OMEGA_REF = SIG["omega_ref"]
+_S_THETA_LOAD = SIG["theta_load"]
+_S_THETA_MOTOR = SIG["theta_motor"]
+_S_THETA_REF = SIG["theta_ref"]
+_S_TORQUE_FRICTION = SIG["torque_friction"]
+_S_TORQUE_LOAD = SIG["torque_load"]
+_S_TORQUE_SHAFT = SIG["torque_shaft"]
+_S_VOLTAGE_AMP = SIG["voltage_amp"]
+_S_VOLTAGE_CMD = SIG["voltage_cmd"]
 _M_DIVERGED = MET["diverged"]
 _M_IAE_POS = MET["iae_pos"]
 _M_IAE_VEL = MET["iae_vel"]
@@ -71,314 +110,505 @@ _M_SS_ERR_POS = MET["ss_err_pos"]
 _M_T50 = MET["t50"]
 _M_T_END = MET["t_end"]
 
+# Rows of a chunk's work array W[_N_ROWS, lanes] (one array, so that the compiler sees constant
+# distances between all the rows a lane step reads and writes, and vectorises without run-time
+# alias checks): the parameters (model.params order), then derived constants, controller and
+# status values, states, metric accumulators, this step's inputs and the recorded values.
+_P0 = 0
+_D0 = _P0 + N_PARAMS
+(_D_INVM, _D_INVL, _D_INVJM, _D_INVJL, _D_CONTACT, _D_NS, _D_CNT, _D_UH, _D_ALIVE, _D_KEND,
+ _D_ISSTEP, _D_STEP, _D_TSTEP, _D_INVQP, _D_INVQS) = range(_D0, _D0 + 15)
+_X0 = _D0 + 15
+_X_THM, _X_WM, _X_I = (_X0 + STATE_INDEX[k] for k in ("theta_m", "w_m", "i"))
+_X_THL, _X_WL = _X0 + STATE_INDEX["theta_L"], _X0 + STATE_INDEX["w_L"]
+_X_Z, _X_XI = _X0 + STATE_INDEX["z"], _X0 + STATE_INDEX["xI"]
+_A0 = _X0 + N_STATES
+(_A_IAE, _A_ISE, _A_ITAE, _A_IAEV, _A_ISEV, _A_ITAEV, _A_EMAX, _A_EVMAX, _A_SS, _A_EMIN_O,
+ _A_EMAX_O, _A_EVMIN_O, _A_EVMAX_O, _A_SMAX, _A_T10, _A_T50, _A_T90, _A_LAST, _A_PKI, _A_PKU,
+ _A_PKWL, _A_PKT) = range(_A0, _A0 + 22)
+_N_ACC = 22
+_U0 = _A0 + _N_ACC  # inputs: reference at t, t+dt/2, t+dt; its velocity; load profile likewise
+_U_R0, _U_R1, _U_R2, _U_RV, _U_L0, _U_L1, _U_L2 = range(_U0, _U0 + 7)
+_REC0 = _U0 + 7  # recorded signals, in tables.SIGNALS order
+_N_ROWS = _REC0 + N_SIGNALS
+
 W_RUNAWAY = 1.0e5  # |w_m| above this is a runaway [rad/s] (~1e6 rpm)
 THETA_RUNAWAY = 1.0e4  # |theta_L| above this is a runaway [rad]
 I_RUNAWAY = 1.0e5  # |i| above this is a runaway [A]
-TINY_DECAY = 1.0e-9  # below this a*dt the bristle update uses its first-order limit [-]
 SS_FRACTION = 0.9  # steady-state error: mean over t >= 0.9*T
 OSC_FRACTION = 0.8  # residual oscillation: peak-to-peak over t >= 0.8*T
 SETTLE_BAND = 0.02  # settling band, fraction of the step
+LANES = 16  # configurations advanced together in a chunk (see make bench) [lanes]
+ALIVE_CHECK = 1024  # steps between checks whether a chunk has any running lane left [steps]
+_INF = np.inf
+_NAN = np.nan
 
 
-@njit(cache=True, inline="always")
-def _dz(u, d):
-    """Dead zone sign(u)*max(|u|-d, 0); d = 0 is the identity."""
-    if u > d:
-        return u - d
-    if u < -d:
-        return u + d
-    return 0.0
-
-
-@njit(cache=True, inline="always")
-def _sat(u, lim):
-    """clip(u, -lim, lim); lim = inf is no limit."""
-    if u > lim:
-        return lim
-    if u < -lim:
-        return -lim
-    return u
-
-
-@njit(cache=True, inline="always")
-def _shaft_torque(p, dth, dw):
-    """Transmission torque T [N*m, load side]: paper Eq. 2, or the contact form (never pulls)."""
-    alpha = p[_ALPHA]
-    t_spring = p[_KL] * _dz(dth, alpha)
-    if alpha > 0.0 and p[_DAMP] == 0.0:
-        if dth > alpha:
-            t = t_spring + p[_C] * dw
-            return t if t > 0.0 else 0.0
-        if dth < -alpha:
-            t = t_spring + p[_C] * dw
-            return t if t < 0.0 else 0.0
-        return 0.0
-    return t_spring + p[_C] * dw
-
-
-@njit(cache=True, inline="always")
-def _algebra(p, inv, th_m, w_m, th_l, w_l, x_i, r):
-    """Controller and transmission outputs for a state: (e_w, u_unsat, u_dem, u_amp, T).
-
-    ``inv`` = (1/m, 1/L, 1/Jm, 1/JL): reciprocals computed once per case (divisions are the
-    slowest operations on the RK4 stages' critical path).
-    """
-    m = p[_M]
-    th_meas = _dz(th_l, p[_D4])
-    w_meas = _dz(w_m, p[_D3])
-    wl_star = _sat(p[_KPP] * (r - th_meas), p[_SAT1])
-    e_w = m * wl_star - w_meas
-    u_unsat = p[_KPS] * e_w + p[_KIS] * x_i
-    u_dem = _sat(u_unsat, p[_SAT2])
-    u_amp = _dz(u_dem, p[_D1])
-    t_shaft = _shaft_torque(p, th_m * inv[0] - th_l, w_m * inv[0] - w_l)
-    return e_w, u_unsat, u_dem, u_amp, t_shaft
-
-
-@njit(cache=True, inline="always")
-def _deriv(p, inv, th_m, w_m, i, th_l, w_l, x_i, r, tf_bristle, visc):
-    """Time derivatives of (theta_m, w_m, i, theta_L, w_L, xI); bristle torque held."""
-    e_w, u_unsat, u_dem, u_amp, t_shaft = _algebra(p, inv, th_m, w_m, th_l, w_l, x_i, r)
-    di = (u_amp - p[_R] * i - p[_KE] * w_m) * inv[1]
-    if abs(i) >= p[_SAT3] and di * i > 0.0:
-        di = 0.0
-    dxi = e_w
-    if abs(u_unsat) > p[_SAT2] and e_w * u_unsat > 0.0:
-        dxi = 0.0
-    t_fric = tf_bristle + visc * w_m
-    dw_m = (p[_KT] * i - p[_BM] * w_m - t_shaft * inv[0] - t_fric) * inv[2]
-    dw_l = (t_shaft - p[_BL] * w_l) * inv[3]
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, locked, extras):
+    """Time derivatives of (theta_m, w_m, i, theta_L, w_L, xI) for one lane (bristle torque
+    ``tf_b`` and held voltage ``uh`` given). ``prm`` is the tuple built by :func:`_lane_params`."""
+    (m, inv_m, inv_l, inv_jm, inv_jl, r_a, kt, ke, bm, bl, kl, alpha, c, contact, kpp, kps, kis,
+     sat1, sat2, sat3, d1, d3, d4, q_pos, q_speed, t_const, k_h, _, _, _, _, _, _, _, _, _, _,
+     _, _, _, _, inv_qp, inv_qs) = prm
+    if not extras:  # no quantisers (a constant at each call site)
+        q_pos = 0.0
+        q_speed = 0.0
+    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs)
+    e_w, u_unsat, u_dem = cascade_nb(r, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
+    u = uh if disc else u_dem
+    u_amp = 0.0 if locked else dead_zone_nb(u, d1)
+    t_shaft = shaft_torque_nb(kl, alpha, c, contact, th_m * inv_m - th_l, w_m * inv_m - w_l)
+    di = armature_rate_nb(i, w_m, u_amp, r_a, inv_l, ke, sat3)
+    dxi = 0.0 if disc else integral_rate_nb(e_w, u_unsat, sat2)
+    dw_m = motor_accel_nb(i, w_m, t_shaft, tf_b + visc * w_m, kt, bm, inv_m, inv_jm)
+    dw_l = load_accel_nb(w_l, t_shaft, load_torque_nb(th_l, t_const, t_prof, k_h), bl, inv_jl)
+    if locked:
+        return 0.0, 0.0, 0.0, w_l, dw_l, 0.0
     return w_m, dw_m, di, w_l, dw_l, dxi
 
 
-@njit(cache=True, inline="always")
-def _bristle_step(p, z, w, dt):
-    """Exact LuGre bristle update for w frozen over dt -> (z+, held bristle torque [N*m]).
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _lane_params(W, j):
+    """The parameters of lane ``j`` as one flat tuple: the first 27 in the order :func:`_rates`
+    unpacks, then those only :func:`_step` reads."""
+    return (W[_M, j], W[_D_INVM, j], W[_D_INVL, j], W[_D_INVJM, j], W[_D_INVJL, j], W[_R, j],
+            W[_KT, j], W[_KE, j], W[_BM, j], W[_BL, j], W[_KL, j], W[_ALPHA, j],
+            W[_C, j], W[_D_CONTACT, j] != 0.0, W[_KPP, j], W[_KPS, j], W[_KIS, j],
+            W[_SAT1, j], W[_SAT2, j], W[_SAT3, j], W[_D1, j], W[_D3, j], W[_D4, j],
+            W[_QPOS, j], W[_QSPEED, j], W[_TLOAD, j], W[_KH, j],
+            W[_FRIC, j] != 0.0, W[_FC, j], W[_FS, j], W[_VS, j], W[_DELTA, j], W[_SIG0, j],
+            W[_SIG1, j], W[_SIG2, j], W[_D_NS, j], W[_TS, j], W[_LOCKED, j] != 0.0,
+            W[_D_ISSTEP, j] != 0.0, W[_D_STEP, j], W[_D_TSTEP, j], W[_D_INVQP, j],
+            W[_D_INVQS, j])
 
-    dz/dt = w - a*z with a = sigma0*|w|/g(w): z+ = z_ss + (z - z_ss)*exp(-a*dt), z_ss = w/a;
-    torque = sigma0*mean(z) + sigma1*(z+ - z)/dt (exact averages over the step).
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _load(W, j):
+    """Lane ``j``'s states, accumulators, controller memory and inputs as tuples."""
+    x = (W[_X_THM, j], W[_X_WM, j], W[_X_I, j], W[_X_THL, j], W[_X_WL, j], W[_X_Z, j],
+         W[_X_XI, j])
+    acc = (W[_A0, j], W[_A0 + 1, j], W[_A0 + 2, j], W[_A0 + 3, j], W[_A0 + 4, j],
+           W[_A0 + 5, j], W[_A0 + 6, j], W[_A0 + 7, j], W[_A0 + 8, j], W[_A0 + 9, j],
+           W[_A0 + 10, j], W[_A0 + 11, j], W[_A0 + 12, j], W[_A0 + 13, j], W[_A0 + 14, j],
+           W[_A0 + 15, j], W[_A0 + 16, j], W[_A0 + 17, j], W[_A0 + 18, j], W[_A0 + 19, j],
+           W[_A0 + 20, j], W[_A0 + 21, j])
+    ctl = (W[_D_CNT, j], W[_D_UH, j], W[_D_ALIVE, j], W[_D_KEND, j])
+    return x, acc, ctl
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _store(W, j, x, acc, ctl):
+    """Write lane ``j``'s tuples back (the inverse of :func:`_load`)."""
+    (W[_X_THM, j], W[_X_WM, j], W[_X_I, j], W[_X_THL, j], W[_X_WL, j], W[_X_Z, j],
+     W[_X_XI, j]) = x
+    (W[_A0, j], W[_A0 + 1, j], W[_A0 + 2, j], W[_A0 + 3, j], W[_A0 + 4, j], W[_A0 + 5, j],
+     W[_A0 + 6, j], W[_A0 + 7, j], W[_A0 + 8, j], W[_A0 + 9, j], W[_A0 + 10, j], W[_A0 + 11, j],
+     W[_A0 + 12, j], W[_A0 + 13, j], W[_A0 + 14, j], W[_A0 + 15, j], W[_A0 + 16, j],
+     W[_A0 + 17, j], W[_A0 + 18, j], W[_A0 + 19, j], W[_A0 + 20, j], W[_A0 + 21, j]) = acc
+    W[_D_CNT, j] = ctl[0]
+    W[_D_UH, j] = ctl[1]
+    W[_D_ALIVE, j] = ctl[2]
+    W[_D_KEND, j] = ctl[3]
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _record(W, j, x, inp, out, m):
+    """Lane ``j``'s signals at the start of the step into W's recording rows (SI)."""
+    th_m, w_m, i, th_l, w_l, z, _ = x
+    u_out, u_amp, t_shaft, t_fric, t_load = out
+    W[_REC0 + _S_THETA_REF, j] = inp[0]
+    W[_REC0 + _S_THETA_LOAD, j] = th_l
+    W[_REC0 + _S_THETA_MOTOR, j] = th_m / m
+    W[_REC0 + _S_OMEGA_REF, j] = inp[3]
+    W[_REC0 + _S_OMEGA_LOAD, j] = w_l
+    W[_REC0 + _S_OMEGA_MOTOR, j] = w_m
+    W[_REC0 + _S_CURRENT, j] = i
+    W[_REC0 + _S_VOLTAGE_CMD, j] = u_out
+    W[_REC0 + _S_VOLTAGE_AMP, j] = u_amp
+    W[_REC0 + _S_TORQUE_SHAFT, j] = t_shaft
+    W[_REC0 + _S_TORQUE_FRICTION, j] = t_fric
+    W[_REC0 + _S_ERR_POS, j] = inp[0] - th_l
+    W[_REC0 + _S_ERR_VEL, j] = inp[3] - w_l
+    W[_REC0 + _S_DTHETA, j] = th_m / m - th_l
+    W[_REC0 + _S_DOMEGA, j] = w_m / m - w_l
+    W[_REC0 + _S_BRISTLE_Z, j] = z
+    W[_REC0 + _S_TORQUE_LOAD, j] = t_load
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extras):
+    """One time step of one lane: metrics at t_k, then RK4 to t_k+1 (a pure function).
+
+    x = (theta_m, w_m, i, theta_L, w_L, z, xI); acc = the 22 metric accumulators (row order of
+    ``_A_*``); ctl = (sample countdown, held voltage, alive, step where it diverged); inp =
+    (reference at t, t+dt/2, t+dt, its velocity at t, load profile at t, t+dt/2, t+dt); lp =
+    :func:`_lane_params`. ``fric_chunk`` False skips the LuGre update (no lane has friction);
+    ``extras`` False skips the digital controller, the quantisers and the locked motor (none is
+    in use); both are constants at each call site, so a variant carries only what it needs.
+    Returns (x+, acc+, ctl+, (u_dem, u_amp, T, Tf, T_load) at t_k).
     """
-    fc = p[_FC]
-    g = fc + (p[_FS] - fc) * math.exp(-(abs(w / p[_VS]) ** p[_DELTA]))
-    a = p[_SIG0] * abs(w) / g
-    ad = a * dt
-    if ad < TINY_DECAY:
-        z_new = z + (w - a * z) * dt
-        z_mean = 0.5 * (z + z_new)
+    (m, inv_m, _, _, _, _, _, _, _, _, kl, alpha, c, contact, kpp, kps, kis, sat1, sat2, sat3,
+     d1, d3, d4, q_pos, q_speed, t_const, k_h, fr, fc, fs, vs, delta, sig0, sig1, sig2, ns, ts,
+     locked, is_step, step, t_step, inv_qp, inv_qs) = lp
+    th_m, w_m, i, th_l, w_l, z, x_i = x
+    (iae, ise, itae, iaev, isev, itaev, emax, evmax, ss, emin_o, emax_o, evmin_o, evmax_o, smax,
+     t10, t50, t90, last_out, pki, pku, pkwl, pkt) = acc
+    cnt, uh, alive, kend = ctl
+    r0, r1, r2, rv, l0, l1, l2 = inp
+    if not extras:
+        ns = 0.0
+        locked = False
+        q_pos = 0.0
+        q_speed = 0.0
+    t = k * dt
+    wgt = 0.5 * dt if (k == 0 or k == n_steps) else dt
+    # --- LuGre bristle step (exact for frozen w_m), held over the RK4 stages
+    if fric_chunk:
+        zb, tb = bristle_step_nb(z, w_m, dt, fc, fs, vs, delta, sig0, sig1)
+        z_new = zb if fr else 0.0
+        tf_b = tb if fr else 0.0
+        visc = sig2 if fr else 0.0
     else:
-        zss = w / a
-        one_minus_e = -math.expm1(-ad)
-        z_new = zss + (z - zss) * (1.0 - one_minus_e)
-        z_mean = zss + (z - zss) * one_minus_e / ad
-    return z_new, p[_SIG0] * z_mean + p[_SIG1] * (z_new - z) / dt
+        z_new = 0.0
+        tf_b = 0.0
+        visc = 0.0
+    # --- controller at t_k (digital: sample, hold, integrate)
+    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs)
+    e_w, u_unsat, u_dem = cascade_nb(r0, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
+    disc = ns > 0.0
+    sample = disc and cnt == 0.0
+    uh = u_dem if sample else uh
+    x_i_next = integral_update_nb(x_i, e_w, u_unsat, sat2, ts) if sample else x_i
+    cnt = ns - 1.0 if sample else cnt - 1.0
+    u_out = 0.0 if locked else (uh if disc else u_dem)
+    u_amp = dead_zone_nb(u_out, d1)
+    t_shaft = shaft_torque_nb(kl, alpha, c, contact, th_m * inv_m - th_l, w_m * inv_m - w_l)
+    # --- metrics (trapezoid weights over the full-resolution samples)
+    e = r0 - th_l
+    ev = rv - w_l
+    ae = abs(e)
+    aev = abs(ev)
+    iae += wgt * ae
+    ise += wgt * e * e
+    itae += wgt * t * ae
+    iaev += wgt * aev
+    isev += wgt * ev * ev
+    itaev += wgt * t * aev
+    emax = max(emax, ae)
+    evmax = max(evmax, aev)
+    if in_ss:
+        ss += e
+    if in_osc:
+        emin_o = min(emin_o, e)
+        emax_o = max(emax_o, e)
+        evmin_o = min(evmin_o, ev)
+        evmax_o = max(evmax_o, ev)
+    pki = max(pki, abs(i))
+    pku = max(pku, abs(u_out))
+    pkwl = max(pkwl, abs(w_l))
+    pkt = max(pkt, abs(t_shaft))
+    act = is_step and t >= t_step
+    s = th_l / step
+    smax = max(smax, s) if act else smax
+    t10 = t if (act and t10 != t10 and s >= 0.1) else t10
+    t50 = t if (act and t50 != t50 and s >= 0.5) else t50
+    t90 = t if (act and t90 != t90 and s >= 0.9) else t90
+    last_out = k if (act and abs(s - 1.0) > SETTLE_BAND) else last_out
+    acc = (iae, ise, itae, iaev, isev, itaev, emax, evmax, ss, emin_o, emax_o, evmin_o, evmax_o,
+           smax, t10, t50, t90, last_out, pki, pku, pkwl, pkt)
+    out = (u_out, u_amp, t_shaft, tf_b + visc * w_m, load_torque_nb(th_l, t_const, l0, k_h))
+    # --- RK4 step (reference and load profile at the stage times; bristle torque held)
+    x_i = x_i_next
+    h = dt
+    a1, b1, c1, d1, e1, f1 = _rates(th_m, w_m, i, th_l, w_l, x_i, r0, l0, lp, tf_b, visc,
+                                    uh, disc, locked, extras)
+    a2, b2, c2, d2, e2, f2 = _rates(th_m + 0.5 * h * a1, w_m + 0.5 * h * b1,
+                                    i + 0.5 * h * c1, th_l + 0.5 * h * d1,
+                                    w_l + 0.5 * h * e1, x_i + 0.5 * h * f1, r1, l1, lp,
+                                    tf_b, visc, uh, disc, locked, extras)
+    a3, b3, c3, d3, e3, f3 = _rates(th_m + 0.5 * h * a2, w_m + 0.5 * h * b2,
+                                    i + 0.5 * h * c2, th_l + 0.5 * h * d2,
+                                    w_l + 0.5 * h * e2, x_i + 0.5 * h * f2, r1, l1, lp,
+                                    tf_b, visc, uh, disc, locked, extras)
+    a4, b4, c4, d4, e4, f4 = _rates(th_m + h * a3, w_m + h * b3, i + h * c3, th_l + h * d3,
+                                    w_l + h * e3, x_i + h * f3, r2, l2, lp, tf_b, visc,
+                                    uh, disc, locked, extras)
+    h6 = h / 6.0
+    th_m += h6 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+    w_m += h6 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
+    i += h6 * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
+    th_l += h6 * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
+    w_l += h6 * (e1 + 2.0 * e2 + 2.0 * e3 + e4)
+    x_i += h6 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
+    i = min(max(i, -sat3), sat3)
+    ok = (abs(w_m) < W_RUNAWAY and abs(th_l) < THETA_RUNAWAY and abs(i) < I_RUNAWAY
+          and abs(th_m) < _INF and abs(w_l) < _INF and abs(x_i) < _INF and abs(z_new) < _INF)
+    dies = alive != 0.0 and not ok and k < n_steps
+    kend = k + 1.0 if dies else kend
+    alive = 0.0 if dies else alive
+    return (th_m, w_m, i, th_l, w_l, z_new, x_i), acc, (cnt, uh, alive, kend), out
 
 
-# Compiled through numba's parallel pipeline although the function has no prange: its extra
-# optimisation passes make this loop about 2x faster (measured: 4.7 vs 10.1 ms per 100,000
-# steps, bit-identical results). With no parallel loop inside, it runs on the calling thread
-# and never enters numba's threading layer, so it is safe to call from several threads.
-@njit(cache=True, parallel=True)
-def simulate_case_nb(p, ref_pos, ref_vel, step_info, dt, n_steps, dec, sig, met):
-    """Integrate one configuration ``p`` for ``n_steps`` steps of ``dt`` [s].
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _advance(W, k, dt, n_steps, in_ss, in_osc, record, fric_chunk, extras):
+    """One time step of every lane of a chunk (the lane loop the compiler vectorises)."""
+    for j in range(W.shape[1]):
+        x, acc, ctl = _load(W, j)
+        lp = _lane_params(W, j)
+        inp = (W[_U_R0, j], W[_U_R1, j], W[_U_R2, j], W[_U_RV, j], W[_U_L0, j], W[_U_L1, j],
+               W[_U_L2, j])
+        xn, acc, ctl, out = _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc,
+                                  fric_chunk, extras)
+        if record:
+            _record(W, j, x, inp, out, lp[0])
+        _store(W, j, xn, acc, ctl)
 
-    ref_pos[2*n_steps+1] (half-step samples, rad), ref_vel[n_steps+1] (rad/s),
-    step_info = (is_step, final value rad, step time s). Writes metrics into ``met[N_METRICS]``
-    and, if ``dec > 0``, signals every ``dec`` steps into ``sig[n_out, N_SIGNALS]``.
-    """
-    th_m = 0.0
-    w_m = 0.0
-    i = 0.0
-    th_l = 0.0
-    w_l = 0.0
-    z = 0.0
-    x_i = 0.0
-    fric = p[_FRIC] != 0.0
-    visc = p[_SIG2] if fric else 0.0
-    m = p[_M]
-    inv = (1.0 / m, 1.0 / p[_L], 1.0 / p[_JM], 1.0 / p[_JL])
-    sat3 = p[_SAT3]
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _init(W, n_real, step_info, qidx, dt, n_steps):
+    """Fill the derived rows, accumulators and controller memory of every lane of ``W`` (the
+    spare lanes beyond ``n_real`` copy lane 0's parameters) -> (any lane has friction, any lane
+    uses the digital controller, a quantiser or the locked motor)."""
+    fric_chunk = False
+    extras = False
+    for j in range(W.shape[1]):
+        jj = j if j < n_real else 0
+        for c in range(N_PARAMS):
+            W[_P0 + c, j] = W[_P0 + c, jj]
+        W[_D_INVM, j] = 1.0 / W[_M, j]
+        W[_D_INVL, j] = 1.0 / W[_L, j]
+        W[_D_INVJM, j] = 1.0 / W[_JM, j]
+        W[_D_INVJL, j] = 1.0 / W[_JL, j]
+        W[_D_CONTACT, j] = 1.0 if W[_DAMP, j] == 0.0 else 0.0
+        W[_D_INVQP, j] = 1.0 / W[_QPOS, j] if W[_QPOS, j] > 0.0 else 0.0
+        W[_D_INVQS, j] = 1.0 / W[_QSPEED, j] if W[_QSPEED, j] > 0.0 else 0.0
+        ts = W[_TS, j]
+        W[_D_NS, j] = np.floor(ts / dt + 0.5) if ts > 0.0 else 0.0
+        W[_D_ALIVE, j] = 1.0
+        W[_D_KEND, j] = n_steps
+        q = qidx[jj]
+        W[_D_ISSTEP, j] = step_info[q, 0]
+        W[_D_STEP, j] = step_info[q, 1]
+        W[_D_TSTEP, j] = step_info[q, 2]
+        W[_A_EMIN_O, j] = _INF
+        W[_A_EMAX_O, j] = -_INF
+        W[_A_EVMIN_O, j] = _INF
+        W[_A_EVMAX_O, j] = -_INF
+        W[_A_SMAX, j] = -_INF
+        W[_A_T10, j] = _NAN
+        W[_A_T50, j] = _NAN
+        W[_A_T90, j] = _NAN
+        W[_A_LAST, j] = -1.0
+        fric_chunk = fric_chunk or W[_FRIC, j] != 0.0
+        extras = extras or (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
+                            or W[_LOCKED, j] != 0.0)
+    return fric_chunk, extras
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, dec, sig, met):
+    """Integrate the lanes of the work array ``W`` together (the first ``n_real`` are real, the
+    rest padding copies of lane 0) and write their metrics and signals."""
+    nl = W.shape[1]
+    fric_chunk, extras = _init(W, n_real, step_info, qidx, dt, n_steps)
+    k_ss = int(np.ceil(SS_FRACTION * n_steps - 1e-9))
+    k_osc = int(np.ceil(OSC_FRACTION * n_steps - 1e-9))
+    has_load = load_half.shape[1] > 1
     countdown = 0  # steps until the next recorded sample
-    duration = n_steps * dt
-    k_ss = int(math.ceil(SS_FRACTION * n_steps - 1e-9))
-    k_osc = int(math.ceil(OSC_FRACTION * n_steps - 1e-9))
-
-    is_step = step_info[0] != 0.0
-    step_size = step_info[1]
-    t_step = step_info[2]
-    iae = ise = itae = emax = 0.0
-    iaev = isev = itaev = evmax = 0.0
-    ss_sum = 0.0
-    ss_n = 0
-    emin_o = math.inf
-    emax_o = -math.inf
-    evmin_o = math.inf
-    evmax_o = -math.inf
-    smax = -math.inf
-    t10 = t50 = t90 = math.nan
-    last_out = -1
-    pk_i = pk_u = pk_wl = pk_t = 0.0
-    diverged = False
-    k_end = n_steps
     for k in range(n_steps + 1):
-        t = k * dt
-        r = ref_pos[2 * k]
-        if fric:
-            z_new, tf_b = _bristle_step(p, z, w_m, dt)
+        # this step's inputs per lane (lanes may follow different references)
+        nxt = 2 * k + 1 if k < n_steps else 2 * k
+        nxt2 = nxt + 1 if k < n_steps else nxt
+        for j in range(nl):
+            q = qidx[j if j < n_real else 0]
+            W[_U_R0, j] = ref_pos[q, 2 * k]
+            W[_U_R1, j] = ref_pos[q, nxt]
+            W[_U_R2, j] = ref_pos[q, nxt2]
+            W[_U_RV, j] = ref_vel[q, k]
+            if has_load:
+                W[_U_L0, j] = load_half[q, 2 * k]
+                W[_U_L1, j] = load_half[q, nxt]
+                W[_U_L2, j] = load_half[q, nxt2]
+        record = dec > 0 and countdown == 0
+        in_ss = k >= k_ss
+        in_osc = k >= k_osc
+        if fric_chunk and extras:
+            _advance(W, k, dt, n_steps, in_ss, in_osc, record, True, True)
+        elif fric_chunk:
+            _advance(W, k, dt, n_steps, in_ss, in_osc, record, True, False)
+        elif extras:
+            _advance(W, k, dt, n_steps, in_ss, in_osc, record, False, True)
         else:
-            z_new = 0.0
-            tf_b = 0.0
-        e_w, u_unsat, u_dem, u_amp, t_shaft = _algebra(p, inv, th_m, w_m, th_l, w_l, x_i, r)
-        e = r - th_l
-        ev = ref_vel[k] - w_l
-        # --- metrics (trapezoid weights over the full-resolution samples)
-        wgt = 0.5 * dt if (k == 0 or k == n_steps) else dt
-        ae = abs(e)
-        aev = abs(ev)
-        iae += wgt * ae
-        ise += wgt * e * e
-        itae += wgt * t * ae
-        iaev += wgt * aev
-        isev += wgt * ev * ev
-        itaev += wgt * t * aev
-        emax = max(emax, ae)
-        evmax = max(evmax, aev)
-        if k >= k_ss:
-            ss_sum += e
-            ss_n += 1
-        if k >= k_osc:
-            emin_o = min(emin_o, e)
-            emax_o = max(emax_o, e)
-            evmin_o = min(evmin_o, ev)
-            evmax_o = max(evmax_o, ev)
-        pk_i = max(pk_i, abs(i))
-        pk_u = max(pk_u, abs(u_dem))
-        pk_wl = max(pk_wl, abs(w_l))
-        pk_t = max(pk_t, abs(t_shaft))
-        if is_step and t >= t_step:
-            s = th_l / step_size
-            smax = max(smax, s)
-            if math.isnan(t10) and s >= 0.1:
-                t10 = t
-            if math.isnan(t50) and s >= 0.5:
-                t50 = t
-            if math.isnan(t90) and s >= 0.9:
-                t90 = t
-            if abs(s - 1.0) > SETTLE_BAND:
-                last_out = k
-        # --- record
+            _advance(W, k, dt, n_steps, in_ss, in_osc, record, False, False)
+        if record:
+            countdown = dec
+            row = k // dec
+            for j in range(n_real):
+                dead = k >= W[_D_KEND, j]
+                for s in range(N_SIGNALS):
+                    sig[j, row, s] = _NAN if dead else W[_REC0 + s, j]
+        countdown -= 1
+        if k % ALIVE_CHECK == ALIVE_CHECK - 1:
+            n_alive = 0
+            for j in range(n_real):
+                n_alive += W[_D_ALIVE, j] != 0.0
+            if n_alive == 0:
+                break  # every lane diverged: the rest of the record stays NaN
+    _finish_metrics(W, n_real, dt, n_steps, k_ss, met)
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, sig, met, fric, extras):
+    """:func:`_run` for a single lane with its states held in registers (the same arithmetic,
+    :func:`_step`, without the round trips through W)."""
+    k_ss = int(np.ceil(SS_FRACTION * n_steps - 1e-9))
+    k_osc = int(np.ceil(OSC_FRACTION * n_steps - 1e-9))
+    has_load = load_half.shape[1] > 1
+    x, acc, ctl = _load(W, 0)
+    lp = _lane_params(W, 0)
+    countdown = 0
+    for k in range(n_steps + 1):
+        nxt = 2 * k + 1 if k < n_steps else 2 * k
+        nxt2 = nxt + 1 if k < n_steps else nxt
+        if has_load:
+            inp = (ref_pos[q, 2 * k], ref_pos[q, nxt], ref_pos[q, nxt2], ref_vel[q, k],
+                   load_half[q, 2 * k], load_half[q, nxt], load_half[q, nxt2])
+        else:
+            inp = (ref_pos[q, 2 * k], ref_pos[q, nxt], ref_pos[q, nxt2], ref_vel[q, k],
+                   0.0, 0.0, 0.0)
+        xn, acc, ctl, out = _step(x, acc, ctl, inp, lp, k, dt, n_steps, k >= k_ss, k >= k_osc,
+                                  fric, extras)
         if dec > 0 and countdown == 0:
             countdown = dec
-            row = sig[k // dec]
-            row[_S_REF] = r
-            row[_S_TH] = th_l
-            row[_S_THM] = th_m / m
-            row[_S_WREF] = ref_vel[k]
-            row[_S_WL] = w_l
-            row[_S_WM] = w_m
-            row[_S_I] = i
-            row[_S_U] = u_dem
-            row[_S_UA] = u_amp
-            row[_S_T] = t_shaft
-            row[_S_TF] = tf_b + visc * w_m
-            row[_S_E] = e
-            row[_S_EV] = ev
-            row[_S_DTH] = th_m / m - th_l
-            row[_S_DW] = w_m / m - w_l
-            row[_S_Z] = z
+            _record(W, 0, x, inp, out, lp[0])
+            for s in range(N_SIGNALS):
+                sig[0, k // dec, s] = W[_REC0 + s, 0]
         countdown -= 1
-        if k == n_steps:
-            break
-        # --- RK4 step (reference at the stage times; bristle torque held)
-        r1 = ref_pos[2 * k + 1]
-        r2 = ref_pos[2 * k + 2]
-        h = dt
-        a1, b1, c1, d1, e1, f1 = _deriv(p, inv, th_m, w_m, i, th_l, w_l, x_i, r, tf_b, visc)
-        a2, b2, c2, d2, e2, f2 = _deriv(p, inv, th_m + 0.5 * h * a1, w_m + 0.5 * h * b1,
-                                        i + 0.5 * h * c1, th_l + 0.5 * h * d1,
-                                        w_l + 0.5 * h * e1, x_i + 0.5 * h * f1, r1, tf_b, visc)
-        a3, b3, c3, d3, e3, f3 = _deriv(p, inv, th_m + 0.5 * h * a2, w_m + 0.5 * h * b2,
-                                        i + 0.5 * h * c2, th_l + 0.5 * h * d2,
-                                        w_l + 0.5 * h * e2, x_i + 0.5 * h * f2, r1, tf_b, visc)
-        a4, b4, c4, d4, e4, f4 = _deriv(p, inv, th_m + h * a3, w_m + h * b3, i + h * c3,
-                                        th_l + h * d3, w_l + h * e3, x_i + h * f3, r2, tf_b, visc)
-        h6 = h / 6.0
-        th_m += h6 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-        w_m += h6 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
-        i += h6 * (c1 + 2.0 * c2 + 2.0 * c3 + c4)
-        th_l += h6 * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
-        w_l += h6 * (e1 + 2.0 * e2 + 2.0 * e3 + e4)
-        x_i += h6 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
-        if i > sat3:
-            i = sat3
-        elif i < -sat3:
-            i = -sat3
-        z = z_new
-        if not (abs(w_m) < W_RUNAWAY and abs(th_l) < THETA_RUNAWAY and abs(i) < I_RUNAWAY
-                and math.isfinite(th_m) and math.isfinite(w_l) and math.isfinite(x_i)
-                and math.isfinite(z)):
-            diverged = True
-            k_end = k + 1
-            break
+        x = xn
+        if ctl[2] == 0.0:
+            break  # diverged: the rest of the record stays NaN
+    _store(W, 0, x, acc, ctl)
+    _finish_metrics(W, 1, dt, n_steps, k_ss, met)
 
-    if diverged:
-        for j in range(N_METRICS):
-            met[j] = math.nan
-        met[_M_DIVERGED] = 1.0
-        met[_M_T_END] = k_end * dt
-        if dec > 0:
-            for kk in range((k_end + dec - 1) // dec, sig.shape[0]):
-                for j in range(sig.shape[1]):
-                    sig[kk, j] = math.nan
-        return
-    met[_M_IAE_POS] = iae
-    met[_M_ISE_POS] = ise
-    met[_M_ITAE_POS] = itae
-    met[_M_RMS_POS] = math.sqrt(ise / duration)
-    met[_M_MAX_POS] = emax
-    met[_M_IAE_VEL] = iaev
-    met[_M_ISE_VEL] = isev
-    met[_M_ITAE_VEL] = itaev
-    met[_M_RMS_VEL] = math.sqrt(isev / duration)
-    met[_M_MAX_VEL] = evmax
-    met[_M_SS_ERR_POS] = ss_sum / ss_n
-    met[_M_P2P_POS] = emax_o - emin_o
-    met[_M_P2P_VEL] = evmax_o - evmin_o
-    met[_M_PEAK_CURRENT] = pk_i
-    met[_M_PEAK_VOLTAGE] = pk_u
-    met[_M_PEAK_LOAD_RATE] = pk_wl
-    met[_M_PEAK_TORQUE] = pk_t
-    met[_M_DIVERGED] = 0.0
-    met[_M_T_END] = duration
-    if is_step:
-        met[_M_OVERSHOOT] = max(0.0, smax - 1.0) * 100.0
-        met[_M_RISE_TIME] = t90 - t10
-        met[_M_T50] = t50 - t_step
-        if last_out < n_steps:
-            met[_M_SETTLING_TIME] = (last_out + 1) * dt - t_step
-        else:
-            met[_M_SETTLING_TIME] = math.nan
+
+@njit(cache=True, error_model="numpy")
+def simulate_chunk_nb(P, a, b, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
+                      dec, sig, met):
+    """Integrate rows ``a..b-1`` of ``P[n_cases, N_PARAMS]`` together in one chunk of
+    :data:`LANES` lanes (``b - a <= LANES``; the spare lanes repeat row ``a`` and are dropped).
+
+    ref_pos[n_refs, 2*n_steps+1] (half steps, rad), ref_vel[n_refs, n_steps+1] (rad/s),
+    load_half[n_refs, 2*n_steps+1 or 1] (N*m; one column: no profile), step_info[n_refs, 3]
+    (is_step, final value rad, step time s), ref_index[n_cases] the reference of each row.
+    Writes met[n_cases, N_METRICS] rows a..b-1 and, if ``dec`` > 0, their signals every ``dec``
+    steps into sig[n_cases, n_out, N_SIGNALS].
+    """
+    W = np.zeros((_N_ROWS, LANES))
+    for j in range(b - a):
+        for c in range(N_PARAMS):
+            W[_P0 + c, j] = P[a + j, c]
+    _run(W, b - a, ref_pos, ref_vel, load_half, step_info, ref_index[a:b], dt, n_steps, dec,
+         sig[a:b], met[a:b])
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec,
+                    sig, met):
+    """The same as :func:`simulate_chunk_nb` for the single row ``a``: a chunk of one lane, its
+    states kept in registers (the fastest path for a few configurations; identical results)."""
+    W = np.empty((_N_ROWS, 1))
+    for r in range(_N_ROWS):
+        W[r, 0] = P[a, r - _P0] if _P0 <= r < _P0 + N_PARAMS else 0.0
+    fric, extras = _init(W, 1, step_info, ref_index[a:a + 1], dt, n_steps)
+    q = ref_index[a]
+    one = sig[a:a + 1]
+    m1 = met[a:a + 1]
+    if fric and extras:
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, True, True)
+    elif fric:
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, True, False)
+    elif extras:
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, False, True)
     else:
-        met[_M_OVERSHOOT] = math.nan
-        met[_M_RISE_TIME] = math.nan
-        met[_M_T50] = math.nan
-        met[_M_SETTLING_TIME] = math.nan
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, False, False)
 
 
-@njit(cache=True)
-def simulate_batch_nb(P, ref_pos, ref_vel, step_info, ref_index, dt, n_steps, dec, sig, met):
-    """Serial loop over the batch: row c of P with reference row ref_index[c]."""
-    for c in range(P.shape[0]):
-        q = ref_index[c]
-        simulate_case_nb(P[c], ref_pos[q], ref_vel[q], step_info[q], dt, n_steps, dec,
-                         sig[c], met[c])
+@njit(cache=True, error_model="numpy")
+def _finish_metrics(W, n_real, dt, n_steps, k_ss, met):
+    """Turn the accumulators of the first ``n_real`` lanes into met[n_real, N_METRICS] (SI)."""
+    duration = n_steps * dt
+    ss_n = n_steps + 1 - k_ss
+    for j in range(n_real):
+        out = met[j]
+        if W[_D_ALIVE, j] == 0.0:
+            for c in range(N_METRICS):
+                out[c] = _NAN
+            out[_M_DIVERGED] = 1.0
+            out[_M_T_END] = W[_D_KEND, j] * dt
+            continue
+        out[_M_IAE_POS] = W[_A_IAE, j]
+        out[_M_ISE_POS] = W[_A_ISE, j]
+        out[_M_ITAE_POS] = W[_A_ITAE, j]
+        out[_M_RMS_POS] = np.sqrt(W[_A_ISE, j] / duration)
+        out[_M_MAX_POS] = W[_A_EMAX, j]
+        out[_M_IAE_VEL] = W[_A_IAEV, j]
+        out[_M_ISE_VEL] = W[_A_ISEV, j]
+        out[_M_ITAE_VEL] = W[_A_ITAEV, j]
+        out[_M_RMS_VEL] = np.sqrt(W[_A_ISEV, j] / duration)
+        out[_M_MAX_VEL] = W[_A_EVMAX, j]
+        out[_M_SS_ERR_POS] = W[_A_SS, j] / ss_n
+        out[_M_P2P_POS] = W[_A_EMAX_O, j] - W[_A_EMIN_O, j]
+        out[_M_P2P_VEL] = W[_A_EVMAX_O, j] - W[_A_EVMIN_O, j]
+        out[_M_PEAK_CURRENT] = W[_A_PKI, j]
+        out[_M_PEAK_VOLTAGE] = W[_A_PKU, j]
+        out[_M_PEAK_LOAD_RATE] = W[_A_PKWL, j]
+        out[_M_PEAK_TORQUE] = W[_A_PKT, j]
+        out[_M_DIVERGED] = 0.0
+        out[_M_T_END] = duration
+        if W[_D_ISSTEP, j] != 0.0:
+            t_step = W[_D_TSTEP, j]
+            out[_M_OVERSHOOT] = max(0.0, W[_A_SMAX, j] - 1.0) * 100.0
+            out[_M_RISE_TIME] = W[_A_T90, j] - W[_A_T10, j]
+            out[_M_T50] = W[_A_T50, j] - t_step
+            last_out = W[_A_LAST, j]
+            out[_M_SETTLING_TIME] = ((last_out + 1.0) * dt - t_step if last_out < n_steps
+                                         else _NAN)
+        else:
+            out[_M_OVERSHOOT] = _NAN
+            out[_M_RISE_TIME] = _NAN
+            out[_M_T50] = _NAN
+            out[_M_SETTLING_TIME] = _NAN
 
 
-@njit(cache=True, parallel=True)
-def simulate_batch_parallel_nb(P, ref_pos, ref_vel, step_info, ref_index, dt, n_steps, dec,
-                               sig, met):
-    """The same as :func:`simulate_batch_nb` with the batch spread over numba threads."""
-    for c in prange(P.shape[0]):
-        q = ref_index[c]
-        simulate_case_nb(P[c], ref_pos[q], ref_vel[q], step_info[q], dt, n_steps, dec,
-                         sig[c], met[c])
+@njit(cache=True, error_model="numpy")
+def simulate_batch_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec,
+                      sig, met, lanes):
+    """Serial loop over chunks of ``lanes`` rows of P (safe in any thread); ``lanes`` 1 runs
+    every row alone, otherwise chunks of :data:`LANES`."""
+    n = P.shape[0]
+    if lanes == 1:
+        for a in range(n):
+            simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt,
+                            n_steps, dec, sig, met)
+        return
+    for ch in range((n + LANES - 1) // LANES):
+        a = ch * LANES
+        simulate_chunk_nb(P, a, min(a + LANES, n), ref_pos, ref_vel, load_half, step_info,
+                          ref_index, dt, n_steps, dec, sig, met)
 
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def simulate_batch_parallel_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
+                               dec, sig, met, lanes):
+    """The same as :func:`simulate_batch_nb` with the chunks spread over numba threads."""
+    n = P.shape[0]
+    if lanes == 1:
+        for a in prange(n):
+            simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt,
+                            n_steps, dec, sig, met)
+        return
+    for ch in prange((n + LANES - 1) // LANES):
+        a = ch * LANES
+        simulate_chunk_nb(P, a, min(a + LANES, n), ref_pos, ref_vel, load_half, step_info,
+                          ref_index, dt, n_steps, dec, sig, met)

@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 
 from ema_cli.errors import EmaError
-from ema_cli.model.params import N_PARAMS, equivalent_inertia, to_row
-from ema_cli.sim.kernel import simulate_batch_nb, simulate_batch_parallel_nb
+from ema_cli.model.params import INDEX, N_PARAMS, equivalent_inertia, to_row
+from ema_cli.sim.kernel import LANES, simulate_batch_nb, simulate_batch_parallel_nb
 from ema_cli.sim.signals import InputSignal, Reference, sample
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 
@@ -24,6 +24,7 @@ DEFAULT_DT = 1e-5  # integration step [s] (MODEL.md §5)
 DEFAULT_OUTPUT_INTERVAL = 1e-4  # recorded-signal interval [s]
 RESOLUTION_LIMIT = 0.3  # warn when dt * (fastest rate) exceeds this [-] (RK4 stability ~2.8)
 MAX_STEPS = 2_000_000_000  # refuse absurd step counts
+LANE_MIN_CASES = 4  # per thread: below this many cases, the one-lane path is faster [cases]
 
 
 def plan_steps(duration: float, dt: float, output_interval: float | None) -> tuple[int, int]:
@@ -111,6 +112,22 @@ class BatchResult:
         return pd.DataFrame(data)
 
 
+def lanes_for(n_cases: int, threads: int) -> int:
+    """1 (every configuration alone, the fastest for a few) or :data:`kernel.LANES` (chunks
+    advanced together in SIMD lanes), whichever is faster for ``n_cases`` on ``threads``."""
+    return 1 if n_cases < LANE_MIN_CASES * max(threads, 1) else LANES
+
+
+def check_sample_times(P: np.ndarray, dt: float) -> None:
+    """Every controller sample time in ``P`` must be 0 (continuous) or a whole multiple of dt."""
+    ts = P[:, INDEX["Ts"]]
+    bad = (ts > 0) & (np.abs(ts / dt - np.round(ts / dt)) > 1e-9 * np.maximum(ts / dt, 1.0))
+    bad |= (ts > 0) & (ts < dt * (1 - 1e-12))
+    if np.any(bad):
+        raise EmaError(f"controller sample time {float(ts[bad][0]):g} s must be a whole multiple "
+                       f"of the integration step dt = {dt:g} s")
+
+
 def simulate_batch(
     P: np.ndarray,
     refs: Sequence[Reference],
@@ -119,16 +136,22 @@ def simulate_batch(
     n_steps: int,
     dec: int = 0,
     parallel: bool = False,
+    lanes: int | None = None,
 ) -> BatchResult:
     """Run every row of ``P`` (SI parameter matrix) for ``n_steps`` steps of ``dt`` seconds.
 
     ``refs`` are references sampled for this grid; row c uses ``refs[ref_index[c]]``
     (``ref_index`` None: all use ``refs[0]``). ``dec`` > 0 records signals every ``dec`` steps.
-    ``parallel`` spreads the batch over numba threads (results are identical either way).
+    ``parallel`` spreads the chunks over numba threads; ``lanes`` is 1 (each configuration alone)
+    or :data:`kernel.LANES` (chunks in SIMD lanes), default :func:`lanes_for`. Results are
+    bit-identical whatever ``parallel`` and ``lanes`` are.
     """
+    import numba
+
     P = np.ascontiguousarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != N_PARAMS:
         raise ValueError(f"P must have shape (n_cases, {N_PARAMS}), got {P.shape}")
+    check_sample_times(P, dt)
     n_cases = P.shape[0]
     if ref_index is None:
         ref_index = np.zeros(n_cases, dtype=np.int64)
@@ -136,13 +159,20 @@ def simulate_batch(
     ref_pos = np.stack([r.pos_half for r in refs])
     ref_vel = np.stack([r.vel for r in refs])
     info = np.stack([r.step_info for r in refs])
+    if any(r.load_half is not None for r in refs):
+        load = np.stack([r.load_half if r.load_half is not None else np.zeros_like(r.pos_half)
+                         for r in refs])
+    else:
+        load = np.zeros((len(refs), 1))
     if ref_pos.shape[1] != 2 * n_steps + 1:
         raise ValueError("references were sampled for a different number of steps")
     n_out = n_steps // dec + 1 if dec > 0 else 0
     sig = np.full((n_cases, n_out, N_SIGNALS), np.nan)
     met = np.empty((n_cases, N_METRICS))
+    if lanes is None:
+        lanes = lanes_for(n_cases, numba.get_num_threads() if parallel else 1)
     kernel = simulate_batch_parallel_nb if parallel else simulate_batch_nb
-    kernel(P, ref_pos, ref_vel, info, ref_index, dt, n_steps, dec, sig, met)
+    kernel(P, ref_pos, ref_vel, load, info, ref_index, dt, n_steps, dec, sig, met, int(lanes))
     t_out = np.arange(n_out) * (dec * dt)
     return BatchResult(P, met, sig if dec > 0 else None, t_out, dt, n_steps, dec)
 

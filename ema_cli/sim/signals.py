@@ -32,6 +32,12 @@ class InputSignal:
     sweep_time chirp sweep duration [s] (0: the run's duration)
     offset    constant added to sine/chirp [rad]
     path      CSV file with columns t_s, theta_ref_deg (csv kind)
+    load_table external load-torque profile ((t [s], ...), (torque [N*m], ...)), linearly
+              interpolated, its end values held outside it; None: no profile
+    load_path  the CSV the profile came from (for reports)
+
+    The signal carries every time-varying input of a run: the position reference and, when
+    given, the load-torque profile (``plant.load_torque_nb``).
     """
 
     kind: str = "step"
@@ -44,6 +50,9 @@ class InputSignal:
     offset: float = 0.0
     path: str | None = None
     table: tuple[tuple[float, ...], tuple[float, ...]] | None = field(default=None, repr=False)
+    load_table: tuple[tuple[float, ...], tuple[float, ...]] | None = field(default=None,
+                                                                          repr=False)
+    load_path: str | None = None
 
     def describe(self) -> str:
         """A short human description in the paper's units."""
@@ -143,11 +152,13 @@ class Reference:
     pos_half[2*n_steps+1]  position at t = j*dt/2 [rad]
     vel[n_steps+1]         velocity at t = k*dt [rad/s]
     step_info[3]           (is_step, final value [rad], step time [s]) for the step metrics
+    load_half[2*n_steps+1] external load-torque profile at t = j*dt/2 [N*m], or None (none)
     """
 
     pos_half: np.ndarray
     vel: np.ndarray
     step_info: np.ndarray
+    load_half: np.ndarray | None = None
 
 
 def sample(sig: InputSignal, dt: float, n_steps: int) -> Reference:
@@ -159,4 +170,9 @@ def sample(sig: InputSignal, dt: float, n_steps: int) -> Reference:
     vel = np.ascontiguousarray(_velocity(sig, t, pos_half[::2], duration), dtype=np.float64)
     is_step = sig.kind == "step" and sig.amplitude != 0.0
     info = np.array([1.0 if is_step else 0.0, sig.amplitude, sig.start], dtype=np.float64)
-    return Reference(pos_half, vel, info)
+    load = None
+    if sig.load_table is not None:
+        load = np.ascontiguousarray(
+            np.interp(th, np.asarray(sig.load_table[0]), np.asarray(sig.load_table[1])),
+            dtype=np.float64)
+    return Reference(pos_half, vel, info, load)

@@ -43,6 +43,8 @@ SIGNALS: tuple[Column, ...] = (
     _col("dtheta", "rad", "dtheta_rad", 1.0, "transmission deflection theta_m/m - theta_L"),
     _col("domega", "rad/s", "domega_rad_s", 1.0, "transmission deflection rate w_m/m - w_L"),
     _col("bristle_z", "rad", "bristle_z_rad", 1.0, "LuGre bristle deflection z"),
+    _col("torque_load", "N*m", "torque_load_nm", 1.0,
+         "external torque on the load, + along +theta_L (config section load)"),
 )
 
 METRICS: tuple[Column, ...] = (
