@@ -81,10 +81,11 @@ def _study_config(path: Path, rel: str) -> tuple[StudyConfig, Path]:
 def compute_threshold(path: Path, spec: ThresholdSpec) -> ThresholdOutcome:
     """Run one threshold search of the batch."""
     cfg, cpath = _study_config(path, spec.config)
-    signal = input_signal(cfg.input, cpath.parent)
+    signal = input_signal(cfg.input, cpath.parent, cfg.load)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != spec.vary}
-    ev = simulation_evaluator(spec.vary, cfg.plant, nls, signal, cfg.simulation.duration_s,
-                              cfg.simulation.dt_s, cfg.friction_reading)
+    ev = simulation_evaluator(spec.vary, cfg.plant_overrides(), nls, signal,
+                              cfg.simulation.duration_s, cfg.simulation.dt_s,
+                              cfg.friction_reading)
     criteria = [Criterion.parse(r) for r in spec.require]
     if spec.require_relative:
         if spec.reference_value is None:

@@ -64,9 +64,9 @@ def threshold_cmd(
         criteria.insert(0, crit)
     pl = lookup(vary)
     cfg = load_config(config, parse_assignments(set_, "--set"), model=StudyConfig)
-    signal = input_signal(cfg.input, config.parent)
+    signal = input_signal(cfg.input, config.parent, cfg.load)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != vary}
-    ev = simulation_evaluator(vary, cfg.plant, nls, signal, cfg.simulation.duration_s,
+    ev = simulation_evaluator(vary, cfg.plant_overrides(), nls, signal, cfg.simulation.duration_s,
                               cfg.simulation.dt_s, cfg.friction_reading)
     t0 = time.perf_counter()
     res = find_threshold(ev, criteria, range_[0], range_[1], direction,  # type: ignore[arg-type]

@@ -145,17 +145,31 @@ def resolve_params(
     return resolve(raw)
 
 
-def input_signal(cfg_input: Any, base_dir: Path | None = None) -> InputSignal:
-    """InputConfig (degrees) -> InputSignal (SI); a CSV profile is read and validated here."""
+def _local(path: str, base_dir: Path | None) -> Path:
+    """A path from a config: as given, else relative to the config's folder."""
+    p = Path(path)
+    if not p.is_absolute() and base_dir is not None and not p.exists():
+        p = base_dir / p
+    return p
+
+
+def input_signal(cfg_input: Any, base_dir: Path | None = None,
+                 cfg_load: Any = None) -> InputSignal:
+    """InputConfig (degrees) [+ LoadConfig] -> InputSignal (SI); CSV profiles (the reference's
+    and the load torque's) are read and validated here."""
     table = None
     path = cfg_input.path
     if cfg_input.kind == "csv":
-        p = Path(path)
-        if not p.is_absolute() and base_dir is not None and not p.exists():
-            p = base_dir / p
+        p = _local(path, base_dir)
         t, th = load_profile(p)
         table = (tuple(t), tuple(th))
         path = str(p)
+    load_table = load_path = None
+    if cfg_load is not None and cfg_load.profile:
+        p = _local(cfg_load.profile, base_dir)
+        t, tq = load_profile(p, value="torque_nm", scale=1.0)
+        load_table = (tuple(t), tuple(tq))
+        load_path = str(p)
     return InputSignal(
         kind=cfg_input.kind,
         amplitude=cfg_input.amplitude_deg * DEG,
@@ -167,12 +181,15 @@ def input_signal(cfg_input: Any, base_dir: Path | None = None) -> InputSignal:
         offset=cfg_input.offset_deg * DEG,
         path=path,
         table=table,
+        load_table=load_table,
+        load_path=load_path,
     )
 
 
 def resolve_run(cfg: RunConfig, base_dir: Path | None = None) -> ResolvedRun:
     """A validated RunConfig -> ResolvedRun (SI)."""
-    params = resolve_params(cfg.plant, cfg.nonlinearities, cfg.friction_reading)
+    params = resolve_params(cfg.plant_overrides(), cfg.nonlinearities, cfg.friction_reading)
     sim = cfg.simulation
-    return ResolvedRun(params, input_signal(cfg.input, base_dir), sim.duration_s, sim.dt_s,
+    return ResolvedRun(params, input_signal(cfg.input, base_dir, cfg.load), sim.duration_s,
+                       sim.dt_s,
                        sim.output_interval_s)

@@ -19,6 +19,7 @@ from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
 from ema_cli.model.params import INDEX, check_value, resolve
 from ema_cli.sim.runner import DEFAULT_DT, DEFAULT_OUTPUT_INTERVAL, plan_steps
 from ema_cli.sim.tables import METRIC_BY_EDGE
+from ema_cli.units import RPM
 
 Scalar = float | int | str
 
@@ -108,6 +109,61 @@ def _check_nonlinearities(values: dict[str, Any]) -> dict[str, Any]:
     return values
 
 
+class LoadConfig(Strict):
+    """The external load on the output (aerodynamic hinge moment, disturbance), load side.
+
+    T_load(t) = torque_nm + profile(t) - spring_nm_per_rad*theta_L, applied to the load inertia,
+    positive along +theta_L.
+    """
+
+    torque_nm: float = Field(0.0, description="constant external torque on the load [N*m]")
+    spring_nm_per_rad: float = Field(
+        0.0, description="hinge-moment gradient k_h: external torque -k_h*theta_L [N*m/rad]")
+    profile: str | None = Field(
+        None, description="CSV with columns t_s, torque_nm added to the torque (interpolated "
+                          "linearly, end values held)")
+
+    @field_validator("torque_nm", "spring_nm_per_rad")
+    @classmethod
+    def _finite(cls, v: float) -> float:
+        if not math.isfinite(v):
+            raise ValueError(f"must be a finite number, got {v}")
+        return v
+
+
+class MotorConfig(Strict):
+    """Motor options."""
+
+    locked: bool = Field(
+        False, description="hold the motor shaft fixed (controller and armature off), for "
+                           "load-deflection tests of the gear train")
+
+
+class ControllerConfig(Strict):
+    """Controller options: continuous (default) or digital with a sample time."""
+
+    sample_time_s: float | None = Field(
+        None, gt=0, description="digital controller sample time [s], a whole multiple of "
+                                "simulation.dt_s (absent: continuous)")
+
+
+class SensorsConfig(Strict):
+    """Sensor quantisation (absent: ideal sensors)."""
+
+    position_counts_per_rev: float | None = Field(
+        None, gt=0, description="load-angle encoder resolution [counts/rev]")
+    speed_resolution_rpm: float | None = Field(
+        None, gt=0, description="motor-speed measurement resolution [rpm]")
+
+
+SECTION_PARAMS = {
+    "load.torque_nm": "T_load", "load.spring_nm_per_rad": "k_h", "motor.locked": "locked",
+    "controller.sample_time_s": "Ts", "sensors.position_counts_per_rev": "q_pos",
+    "sensors.speed_resolution_rpm": "q_speed",
+}
+"""Config settings that set a model parameter (``config path -> parameter``)."""
+
+
 class RunConfig(Strict):
     """Everything one simulation needs (the part of a study config ``ema simulate`` reads)."""
 
@@ -123,7 +179,54 @@ class RunConfig(Strict):
                     "magnitude in the units of `ema locations`, or off")
     friction_reading: Literal["sigma2", "scale"] = Field(
         "sigma2", description="friction1 magnitude: viscous sigma2 [N*m*s/rad] or Fc scale [N*m]")
+    load: LoadConfig = Field(default_factory=LoadConfig)
+    motor: MotorConfig = Field(default_factory=MotorConfig)
+    controller: ControllerConfig = Field(default_factory=ControllerConfig)
+    sensors: SensorsConfig = Field(default_factory=SensorsConfig)
     seed: int = Field(0, ge=0, description="seed of everything random")
+
+    def section_params(self) -> dict[str, float]:
+        """The model parameters (SI) set by the load, motor, controller and sensors sections."""
+        out: dict[str, float] = {}
+        if self.load.torque_nm:
+            out["T_load"] = self.load.torque_nm
+        if self.load.spring_nm_per_rad:
+            out["k_h"] = self.load.spring_nm_per_rad
+        if self.motor.locked:
+            out["locked"] = 1.0
+        if self.controller.sample_time_s is not None:
+            out["Ts"] = self.controller.sample_time_s
+        if self.sensors.position_counts_per_rev is not None:
+            out["q_pos"] = 2.0 * math.pi / self.sensors.position_counts_per_rev
+        if self.sensors.speed_resolution_rpm is not None:
+            out["q_speed"] = self.sensors.speed_resolution_rpm * RPM
+        return out
+
+    def plant_overrides(self) -> dict[str, Any]:
+        """``plant`` (SI) together with the parameters of the option sections."""
+        return {**self.plant, **self.section_params()}
+
+    @model_validator(mode="after")
+    def _sections(self) -> RunConfig:
+        for path, param in SECTION_PARAMS.items():
+            section, key = path.split(".")
+            if param in self.plant and getattr(getattr(self, section), key) not in (None, 0.0,
+                                                                                     False):
+                raise ValueError(f"{path} and plant.{param} set the same parameter; give one")
+        ts = self.controller.sample_time_s if "Ts" not in self.plant else None
+        if ts is None and "Ts" in self.plant:
+            try:
+                ts = check_value("Ts", self.plant["Ts"]) or None
+            except EmaError:
+                ts = None
+        sim = getattr(self, "simulation", None)
+        if ts is not None and sim is not None:
+            n = ts / sim.dt_s
+            if n < 1 - 1e-9 or abs(n - round(n)) > 1e-9 * max(n, 1.0):
+                raise ValueError(
+                    f"controller.sample_time_s ({ts:g} s) must be a whole multiple of "
+                    f"simulation.dt_s ({sim.dt_s:g} s)")
+        return self
 
     @field_validator("name")
     @classmethod

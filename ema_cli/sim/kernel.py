@@ -386,7 +386,7 @@ def _init(W, n_real, step_info, qidx, dt, n_steps):
         ts = W[_TS, j]
         W[_D_NS, j] = np.floor(ts / dt + 0.5) if ts > 0.0 else 0.0
         W[_D_ALIVE, j] = 1.0
-        W[_D_KEND, j] = n_steps
+        W[_D_KEND, j] = n_steps + 1.0  # the step it diverged at (never, unless set)
         q = qidx[jj]
         W[_D_ISSTEP, j] = step_info[q, 0]
         W[_D_STEP, j] = step_info[q, 1]

@@ -68,31 +68,34 @@ class InputSignal:
         return f"profile {self.path}"
 
 
-def load_profile(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Read a CSV profile (columns ``t_s, theta_ref_deg``) -> (t [s], theta [rad]), validated."""
+def load_profile(path: str | Path, value: str = "theta_ref_deg",
+                 scale: float = DEG) -> tuple[np.ndarray, np.ndarray]:
+    """Read a CSV profile (columns ``t_s`` and ``value``) -> (t [s], value*scale), validated.
+
+    The reference profile has ``theta_ref_deg`` (returned in rad); the load-torque profile
+    ``torque_nm`` (``scale`` 1).
+    """
     import pandas as pd
 
     p = Path(path)
     if not p.is_file():
-        raise EmaError(f"input profile '{p}' does not exist")
+        raise EmaError(f"profile '{p}' does not exist")
     try:
         df = pd.read_csv(p)
     except Exception as exc:  # pandas raises many types for malformed files
-        raise EmaError(f"input profile '{p}' is not a readable CSV: {exc}") from None
-    missing = [c for c in ("t_s", "theta_ref_deg") if c not in df.columns]
+        raise EmaError(f"profile '{p}' is not a readable CSV: {exc}") from None
+    missing = [c for c in ("t_s", value) if c not in df.columns]
     if missing:
-        raise EmaError(
-            f"input profile '{p}' lacks column(s) {missing}; expected t_s, theta_ref_deg"
-        )
+        raise EmaError(f"profile '{p}' lacks column(s) {missing}; expected t_s, {value}")
     t = pd.to_numeric(df["t_s"], errors="coerce").to_numpy(float)
-    th = pd.to_numeric(df["theta_ref_deg"], errors="coerce").to_numpy(float)
+    y = pd.to_numeric(df[value], errors="coerce").to_numpy(float)
     if len(t) < 2:
-        raise EmaError(f"input profile '{p}' needs at least 2 rows, has {len(t)}")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(th))):
-        raise EmaError(f"input profile '{p}' has empty, non-numeric, NaN or inf values")
+        raise EmaError(f"profile '{p}' needs at least 2 rows, has {len(t)}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y))):
+        raise EmaError(f"profile '{p}' has empty, non-numeric, NaN or inf values")
     if np.any(np.diff(t) <= 0):
-        raise EmaError(f"input profile '{p}': t_s must be strictly increasing")
-    return t, th * DEG
+        raise EmaError(f"profile '{p}': t_s must be strictly increasing")
+    return t, y * scale
 
 
 def _position(sig: InputSignal, t: np.ndarray, duration: float) -> np.ndarray:

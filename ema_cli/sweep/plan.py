@@ -33,8 +33,6 @@ from ema_cli.sweep.expand import AxisPoint, JobSpec, expand, neutral_value
 from ema_cli.units import DEG
 
 KEY_LENGTH = 20  # hex digits of a job's content hash [-]
-FINGERPRINT_FILES = ("sim/kernel.py", "sim/signals.py", "sim/tables.py", "model/params.py")
-"""Sources whose text is part of every job's cache key: edit the simulator, the cache misses."""
 LOG_DECADES = 2.0  # numeric axes spanning at least this many decades (all > 0) plot on log axes
 UNIT_SLUGS = {"deg/s": "deg_s", "%": "pct", "-": ""}
 """Column-name suffixes of units that the generic rule would spell badly."""
@@ -62,21 +60,23 @@ def fmt(value: float | str) -> str:
 
 @functools.cache
 def simulator_fingerprint() -> str:
-    """A hash of the ema version and the simulator sources (part of every job key)."""
-    root = Path(__file__).resolve().parent.parent
-    h = hashlib.sha256(__version__.encode())
-    for rel in FINGERPRINT_FILES:
-        h.update((root / rel).read_bytes())
-    return h.hexdigest()[:16]
+    """The ema version and the hash of the simulator's sources (``ema_cli._numba.CACHE_KEY``,
+    the key of the compiled kernels too): part of every job key, so editing the model or the
+    simulator makes the job cache miss."""
+    from ema_cli._numba import CACHE_KEY
+
+    return hashlib.sha256(f"{__version__}:{CACHE_KEY}".encode()).hexdigest()[:16]
 
 
 def signal_identity(sig: InputSignal) -> dict[str, Any]:
     """The input signal as hashable data (a CSV profile by the hash of its samples)."""
     data = dataclasses.asdict(sig)
-    table = data.pop("table")
     data.pop("path")
-    if table is not None:
-        data["table"] = content_hash([list(table[0]), list(table[1])], 16)
+    data.pop("load_path")
+    for key in ("table", "load_table"):
+        table = data.pop(key)
+        if table is not None:
+            data[key] = content_hash([list(table[0]), list(table[1])], 16)
     return data
 
 
@@ -244,7 +244,7 @@ def _values_and_label(spec: JobSpec, axes: list[AxisInfo], cfg: StudyConfig,
                                  tuple[str, ...]]:
     """The swept columns, the nonlinearity assignments, the plant overrides, label parts."""
     nls: dict[str, Any] = dict(cfg.nonlinearities)
-    plant: dict[str, Any] = dict(cfg.plant)
+    plant: dict[str, Any] = cfg.plant_overrides()
     values: dict[str, float | str] = {}
     parts: list[str] = []
     if spec.baseline:
@@ -307,12 +307,12 @@ def plan_sweep(cfg: StudyConfig, base_dir: Path | None = None, source: str = "co
     sim = cfg.simulation
     record = cfg.outputs.needs_signals
     n_steps, dec = plan_steps(sim.duration_s, sim.dt_s, sim.output_interval_s)
-    sig = input_signal(cfg.input, base_dir)
+    sig = input_signal(cfg.input, base_dir, cfg.load)
     axes = [_axis_info(k, a) for k, a in enumerate(cfg.sweep.axes)]
 
     base_spec = JobSpec((), baseline=True)
     try:
-        plain = resolve_params(cfg.plant, cfg.nonlinearities, cfg.friction_reading)
+        plain = resolve_params(cfg.plant_overrides(), cfg.nonlinearities, cfg.friction_reading)
         _, base_nls, base_plant, _ = _values_and_label(base_spec, axes, cfg, {}, plain)
         base_params = resolve_params(base_plant, base_nls, cfg.friction_reading)
     except EmaError as exc:

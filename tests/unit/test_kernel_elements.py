@@ -1,4 +1,4 @@
-"""Nonlinear elements and the LuGre update against hand-computed values and fine integration."""
+"""model/ elements, transmission and LuGre update vs hand-computed values and fine integration."""
 
 from __future__ import annotations
 
@@ -8,12 +8,46 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from ema_cli.model.elements import dead_zone_nb as _dz
+from ema_cli.model.elements import quantize_nb
+from ema_cli.model.elements import saturate_nb as _sat
+from ema_cli.model.lugre import bristle_step_nb, steady_friction_nb
 from ema_cli.model.params import INDEX, resolve, to_row
-from ema_cli.sim.kernel import _bristle_step, _dz, _sat, _shaft_torque
+from ema_cli.model.transmission import shaft_torque, shaft_torque_nb
 
 
 def row(**over) -> np.ndarray:
     return np.array(to_row(resolve(over)))
+
+
+def _shaft_torque(p, dth, dw):
+    return shaft_torque_nb(p[INDEX["kL"]], p[INDEX["alpha"]], p[INDEX["c"]],
+                           p[INDEX["damping"]] == 0.0, dth, dw)
+
+
+def _bristle_step(p, z, w, dt):
+    return bristle_step_nb(z, w, dt, *(p[INDEX[k]] for k in
+                                       ("Fc", "Fs", "vs", "delta", "sigma0", "sigma1")))
+
+
+@pytest.mark.parametrize(("u", "q", "expected"), [
+    (0.26, 0.1, 0.3), (-0.26, 0.1, -0.3), (0.24, 0.1, 0.2), (0.05, 0.1, 0.1), (0.3, 0.0, 0.3),
+])
+def test_quantizer(u, q, expected):
+    # q*floor(u/q + 1/2): 0.26/0.1 + 0.5 = 3.1 -> 3 -> 0.3; q = 0 is the identity
+    assert quantize_nb(u, q, 1.0 / q if q else 0.0) == pytest.approx(expected, abs=1e-15)
+
+
+def test_array_torque_equals_scalar_torque():
+    # the array helper used by identification and figures is the kernel's function, sample by
+    # sample (exact equality: same compiled arithmetic)
+    rng = np.random.default_rng(3)
+    dth, dw = rng.normal(0, 0.005, 500), rng.normal(0, 1.0, 500)
+    for form in ("contact", "paper"):
+        arr = shaft_torque(dth, dw, 590.0, 0.003, 0.8, form)
+        ref = [shaft_torque_nb(590.0, 0.003, 0.8, form == "contact", a, b)
+               for a, b in zip(dth, dw, strict=True)]
+        assert np.array_equal(arr, np.array(ref))
 
 
 @pytest.mark.parametrize(("u", "d", "expected"), [
@@ -73,6 +107,8 @@ def test_lugre_steady_state_friction(w):
     g = fc + (fs - fc) * math.exp(-abs(w / p[INDEX["vs"]]) ** p[INDEX["delta"]])
     expected = g * math.copysign(1.0, w) + p[INDEX["sigma2"]] * w
     assert tf_bristle + p[INDEX["sigma2"]] * w == pytest.approx(expected, rel=1e-9)
+    steady = steady_friction_nb(w, fc, fs, p[INDEX["vs"]], p[INDEX["delta"]], p[INDEX["sigma2"]])
+    assert steady == pytest.approx(expected, rel=1e-12)
 
 
 @pytest.mark.parametrize(("w", "z0"), [(0.5, 0.0), (-3.0, 1e-4), (20.0, -1e-3), (1e-6, 2e-5)])

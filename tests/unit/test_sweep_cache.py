@@ -62,8 +62,8 @@ def test_chunk_sizes_cover_every_job_and_respect_the_caps():
     assert chunk_sizes(3, 100_000, 2, "threads", 0) == [2, 1]
     # the job-steps cap: 1e7-step jobs -> 3e7 // 1e7 = 3 per single-thread chunk
     assert chunk_sizes(30, 10_000_000, 1, "serial", 0) == [3] * 10
-    # the signal-memory cap: 1e6 samples x 16 signals x 8 B = 128 MB per job -> 2 per chunk
-    assert chunk_sizes(8, 1_000, 1, "serial", 1_000_000) == [2] * 4
+    # the signal-memory cap: 7e5 samples x 17 signals x 8 B = 95 MB per job -> 2 per 256 MiB
+    assert chunk_sizes(8, 1_000, 1, "serial", 700_000) == [2] * 4
     assert chunk_sizes(10, 1_000, 2, "loky", 0, chunk_size=4) == [4, 4, 2]
     assert chunk_sizes(0, 1_000, 2, "loky", 0) == []
 
