@@ -582,16 +582,29 @@ def _finish_metrics(W, n_real, dt, n_steps, k_ss, met):
 
 
 @njit(cache=True, error_model="numpy")
-def simulate_batch_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec,
-                      sig, met, lanes):
-    """Serial loop over chunks of ``lanes`` rows of P (safe in any thread); ``lanes`` 1 runs
-    every row alone, otherwise chunks of :data:`LANES`."""
+def simulate_rows_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec, sig,
+                     met):
+    """Every row of P alone (:func:`simulate_one_nb`), serially; safe in any thread."""
+    for a in range(P.shape[0]):
+        simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
+                        dec, sig, met)
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def simulate_rows_parallel_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
+                              dec, sig, met):
+    """:func:`simulate_rows_nb` with the rows spread over numba threads."""
+    for a in prange(P.shape[0]):
+        simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
+                        dec, sig, met)
+
+
+@njit(cache=True, error_model="numpy")
+def simulate_lanes_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec, sig,
+                      met):
+    """Chunks of :data:`LANES` rows of P advanced together (:func:`simulate_chunk_nb`),
+    serially; safe in any thread."""
     n = P.shape[0]
-    if lanes == 1:
-        for a in range(n):
-            simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt,
-                            n_steps, dec, sig, met)
-        return
     for ch in range((n + LANES - 1) // LANES):
         a = ch * LANES
         simulate_chunk_nb(P, a, min(a + LANES, n), ref_pos, ref_vel, load_half, step_info,
@@ -599,16 +612,16 @@ def simulate_batch_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, 
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def simulate_batch_parallel_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
-                               dec, sig, met, lanes):
-    """The same as :func:`simulate_batch_nb` with the chunks spread over numba threads."""
+def simulate_lanes_parallel_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
+                               dec, sig, met):
+    """:func:`simulate_lanes_nb` with the chunks spread over numba threads."""
     n = P.shape[0]
-    if lanes == 1:
-        for a in prange(n):
-            simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt,
-                            n_steps, dec, sig, met)
-        return
     for ch in prange((n + LANES - 1) // LANES):
         a = ch * LANES
         simulate_chunk_nb(P, a, min(a + LANES, n), ref_pos, ref_vel, load_half, step_info,
                           ref_index, dt, n_steps, dec, sig, met)
+
+
+KERNELS = {(False, False): simulate_rows_nb, (True, False): simulate_rows_parallel_nb,
+           (False, True): simulate_lanes_nb, (True, True): simulate_lanes_parallel_nb}
+"""Entry points by (parallel, in lanes)."""

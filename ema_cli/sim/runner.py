@@ -16,7 +16,7 @@ import pandas as pd
 
 from ema_cli.errors import EmaError
 from ema_cli.model.params import INDEX, N_PARAMS, equivalent_inertia, to_row
-from ema_cli.sim.kernel import LANES, simulate_batch_nb, simulate_batch_parallel_nb
+from ema_cli.sim.kernel import KERNELS, LANES
 from ema_cli.sim.signals import InputSignal, Reference, sample
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 
@@ -171,8 +171,23 @@ def simulate_batch(
     met = np.empty((n_cases, N_METRICS))
     if lanes is None:
         lanes = lanes_for(n_cases, numba.get_num_threads() if parallel else 1)
-    kernel = simulate_batch_parallel_nb if parallel else simulate_batch_nb
-    kernel(P, ref_pos, ref_vel, load, info, ref_index, dt, n_steps, dec, sig, met, int(lanes))
+    if lanes not in (1, LANES):
+        raise ValueError(f"lanes must be 1 or {LANES}, got {lanes}")
+    # group the rows that need the costlier kernel variants (friction; digital controller,
+    # quantisers, locked motor) so that a chunk rarely mixes them; results are put back in order
+    extra = ((P[:, INDEX["Ts"]] > 0) | (P[:, INDEX["q_pos"]] > 0) | (P[:, INDEX["q_speed"]] > 0)
+             | (P[:, INDEX["locked"]] != 0))
+    order = np.argsort(2 * (P[:, INDEX["friction"]] != 0) + extra, kind="stable")
+    identity = bool(np.all(order == np.arange(n_cases)))
+    Pk = P if identity else np.ascontiguousarray(P[order])
+    qk = ref_index if identity else np.ascontiguousarray(ref_index[order])
+    KERNELS[(bool(parallel), lanes > 1)](Pk, ref_pos, ref_vel, load, info, qk, dt, n_steps, dec,
+                                         sig, met)
+    if not identity:
+        inverse = np.empty_like(order)
+        inverse[order] = np.arange(n_cases)
+        met = met[inverse]
+        sig = sig[inverse]
     t_out = np.arange(n_out) * (dec * dt)
     return BatchResult(P, met, sig if dec > 0 else None, t_out, dt, n_steps, dec)
 
