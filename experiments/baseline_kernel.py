@@ -1,6 +1,9 @@
-"""The batched fixed-step kernel of the reference EMA (numba): RK4 + exact LuGre bristle update.
+"""Benchmark baseline: the first wave's scalar kernel (one configuration per loop), verbatim.
 
-States ``x = [theta_m, w_m, i, theta_L, w_L, z, xI]`` (MODEL.md §2). Each configuration is one row
+Kept only so that `make bench` measures the v2 kernel against it in the same run; the simulator
+does not use it. Its original description follows.
+
+States ``x = [theta_m, w_m, i, theta_L, w_L, z, xI]``. Each configuration is one row
 of the parameter matrix ``P[n_cases, N_PARAMS]`` (column order: ``ema_cli.model.params.PARAMS``).
 The kernel integrates every row independently, accumulates the tracking-error metrics online at
 full resolution (every step, trapezoid rule) and, when asked, records the signals of
@@ -14,7 +17,7 @@ Numerics
   ``z+ = z_ss + (z - z_ss)*exp(-a*dt)``, ``a = sigma0*|w|/g(w)``, ``z_ss = w/a``, and the
   bristle torque ``sigma0*mean(z) + sigma1*(z+ - z)/dt`` (exact step averages) is held over the
   RK4 stages. The viscous part ``sigma2*w_m`` is smooth and is evaluated at every stage (more
-  accurate than holding it; this is our one departure from MODEL.md §5, see the README).
+  accurate than holding it; this is our one departure from docs/model.md §6, see the README).
 * Current limit: ``di/dt = 0`` while ``|i| >= sat3`` and pushing outward; ``i`` is clamped to
   ``+-sat3`` after each step. Clamping anti-windup on the speed PI while SAT2 is active.
 * A non-finite state or one past the runaway bounds marks the row diverged: its metrics are NaN

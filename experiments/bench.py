@@ -1,4 +1,5 @@
-"""`make bench`: kernel throughput, batch scaling, a same-accuracy comparison with scipy, sweeps.
+"""`make bench`: kernel throughput vs the scalar baseline, same-accuracy comparisons with scipy,
+identification, sweeps.
 
 Every figure is the median of several repeats measured in this one run (the machines are shared
 and noisy); ratios are between numbers of the same run. Nothing here is asserted: tests check
@@ -26,26 +27,53 @@ REPEATS = 5
 LINEAR = {"sat1": "off", "sat2": "off", "sat3": "off", "alpha": 0.0, "friction": 0}
 
 
+BATCHES = (1, 64, 256, 1024)
+KERNEL_CASES = {
+    "defaults": {},
+    "backlash 0.01 deg": {"alpha": 0.01 * DEG},
+    "LuGre friction 0.01": {"friction": 1, "sigma2": 0.01},
+}
+
+
+def _baseline_kernel():
+    """The first wave's scalar kernel (one configuration per loop iteration), kept verbatim in
+    ``baseline_kernel.py`` beside this script so every run measures both."""
+    path = Path(__file__).with_name("baseline_kernel.py")
+    spec = importlib.util.spec_from_file_location("baseline_kernel", path)
+    mod = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(mod)  # type: ignore[union-attr]
+    return mod
+
+
 def kernel_throughput() -> None:
+    """System-steps/s (configurations x RK4 steps per second) of the v2 kernel (one-lane path
+    for a batch of 1, SIMD lanes over the cores above) against the scalar baseline (serial for 1,
+    prange over the cores above), 0.1 deg step, 1 s, dt 1e-5 s, metrics only."""
+    from ema_cli.sim.tables import N_METRICS, N_SIGNALS
+
+    base = _baseline_kernel()
     dt = 1e-5
     n, _ = plan_steps(1.0, dt, None)
     ref = sample(InputSignal("step", 0.1 * DEG), dt, n)
-    print("\n== kernel throughput: 0.1 deg step, 1 s, dt 1e-5 s (100,000 RK4 steps), metrics only")
-    cases = {
-        "defaults": {},
-        "dead band 0.01 deg": {"alpha": 0.01 * DEG},
-        "LuGre friction 0.01": {"friction": 1, "sigma2": 0.01},
-    }
-    for label, over in cases.items():
-        P = np.array([to_row(resolve(over))])
-        t = median_time(lambda P=P: simulate_batch(P, [ref], None, dt, n, 0))
-        print(f"  one configuration, {label:22s} {n / t / 1e6:6.2f} M steps/s  ({t * 1e3:.1f} ms)")
-    P = np.repeat(np.array([to_row(resolve({}))]), 64, axis=0)
-    ts = median_time(lambda: simulate_batch(P, [ref], None, dt, n, 0, parallel=False), 3)
-    tp = median_time(lambda: simulate_batch(P, [ref], None, dt, n, 0, parallel=True), 3)
-    print(f"  batch of 64, serial loop           {64 * n / ts / 1e6:6.2f} M steps/s  ({ts:.2f} s)")
-    print(f"  batch of 64, numba prange threads  {64 * n / tp / 1e6:6.2f} M steps/s  ({tp:.2f} s)"
-          f"  -> x{ts / tp:.2f}")
+
+    def run_base(P: np.ndarray) -> None:
+        kernel = base.simulate_batch_nb if len(P) == 1 else base.simulate_batch_parallel_nb
+        kernel(P, ref.pos_half[None], ref.vel[None], ref.step_info[None],
+               np.zeros(len(P), np.int64), dt, n, 0, np.empty((len(P), 0, N_SIGNALS)),
+               np.empty((len(P), N_METRICS)))
+
+    print("\n== kernel throughput: 0.1 deg step, 1 s, dt 1e-5 s, metrics only "
+          "[M system-steps/s]")
+    print(f"  {'case':22s} {'batch':>5s} {'v2 kernel':>10s} {'baseline':>10s} {'ratio':>6s}")
+    for label, over in KERNEL_CASES.items():
+        for size in BATCHES:
+            P = np.repeat(np.array([to_row(resolve(over))]), size, axis=0)
+            reps = REPEATS if size <= 64 else 3
+            t_new = median_time(lambda P=P: simulate_batch(P, [ref], None, dt, n, 0,
+                                                           parallel=len(P) > 1), reps)
+            t_old = median_time(lambda P=P: run_base(P), reps)
+            print(f"  {label:22s} {size:5d} {size * n / t_new / 1e6:10.1f} "
+                  f"{size * n / t_old / 1e6:10.1f} {t_old / t_new:6.2f}")
 
 
 def _kernel_step_run(p: dict[str, float], step: float, duration: float) -> tuple[float, np.ndarray]:
@@ -105,7 +133,7 @@ def same_accuracy_vs_scipy() -> None:
 
 
 def _python_rhs(p: dict[str, float], step: float):
-    """MODEL.md §2 without friction, written independently in plain Python for solve_ivp."""
+    """docs/model.md §2 without friction, written independently in plain Python for solve_ivp."""
     m, alpha = p["m"], p["alpha"]
 
     def dz(u: float, d: float) -> float:

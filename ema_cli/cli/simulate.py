@@ -116,7 +116,8 @@ def simulate_cmd(
     write_csv(folder / "timeseries.csv", ts, float_format="%.9g")
     write_csv(folder / "metrics.csv", metrics, float_format="%.9g")
     nls = ", ".join(f"{k}={v}" for k, v in cfg.nonlinearities.items()) or "no study nonlinearities"
-    title = f"{cfg.name}: {run.signal.describe()}, {nls}"
+    options = cfg.describe_options()
+    title = f"{cfg.name}: {run.signal.describe()}, {nls}" + (f", {options}" if options else "")
     write_figure(folder / "tracking.png", tracking_figure(ts, title))
     write_json(folder / "manifest.json", manifest(
         "simulate", seed=cfg.seed, dt_s=run.dt, duration_s=run.duration,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -201,6 +202,25 @@ class RunConfig(Strict):
         if self.sensors.speed_resolution_rpm is not None:
             out["q_speed"] = self.sensors.speed_resolution_rpm * RPM
         return out
+
+    def describe_options(self) -> str:
+        """The option sections in use, for titles and reports ('' when none)."""
+        parts = []
+        if self.load.torque_nm:
+            parts.append(f"load torque {self.load.torque_nm:g} N*m")
+        if self.load.spring_nm_per_rad:
+            parts.append(f"hinge gradient {self.load.spring_nm_per_rad:g} N*m/rad")
+        if self.load.profile:
+            parts.append(f"load profile {Path(self.load.profile).name}")
+        if self.motor.locked:
+            parts.append("motor locked")
+        if self.controller.sample_time_s is not None:
+            parts.append(f"digital controller Ts {self.controller.sample_time_s * 1e3:g} ms")
+        if self.sensors.position_counts_per_rev is not None:
+            parts.append(f"encoder {self.sensors.position_counts_per_rev:g} counts/rev")
+        if self.sensors.speed_resolution_rpm is not None:
+            parts.append(f"speed resolution {self.sensors.speed_resolution_rpm:g} rpm")
+        return ", ".join(parts)
 
     def plant_overrides(self) -> dict[str, Any]:
         """``plant`` (SI) together with the parameters of the option sections."""

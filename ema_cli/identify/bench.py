@@ -27,7 +27,7 @@ def bench_identify(log: Callable[[str], None] = print) -> dict[str, float]:
     settings = IdentifySettings()
     data = load_data(settings)
     out: dict[str, float] = {}
-    log(f"\n== identification: {data.n_samples:,} samples (MODEL.md §7 chirp), "
+    log(f"\n== identification: {data.n_samples:,} samples (docs/model.md §8 chirp), "
         f"median of {REPEATS}")
     for form in ("contact", "paper"):
         prob = build_problem(settings.model_copy(update={"model": form}), data)

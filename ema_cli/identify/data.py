@@ -1,4 +1,4 @@
-"""Identification data: synthetic (the full simulator, MODEL.md §7) or a user's CSV, validated.
+"""Identification data: synthetic (the full simulator, docs/model.md §8) or a user's CSV, validated.
 
 Both give an :class:`IdentData` with the transmission deflection dth [rad], its rate dw [rad/s]
 and the measured torque [N*m] (load side), sampled at times t [s].

@@ -26,7 +26,8 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from ema_cli._numba import njit
-from ema_cli.identify.problem import TorqueProblem, torque_nb
+from ema_cli.identify.problem import TorqueProblem
+from ema_cli.model.transmission import shaft_torque_nb
 
 GRID_POINTS = 201  # alpha grid of the profile over the search range [points]
 ACTIVE_SET_ITERS = 30  # contact form: active-set iterations per alpha [-]
@@ -123,7 +124,7 @@ def profile_nb(alphas, dth, dw, tq, c_fixed, fit_c, contact, max_iter, j_out, x_
             changes = 0
             for i in range(n):
                 d = dth[i]
-                r = tq[i] - torque_nb(k, a, c, contact, d, dw[i])
+                r = tq[i] - shaft_torque_nb(k, a, c, contact, d, dw[i])
                 jsum += r * r
                 if clamp and have_prev and (d > a or d < -a):
                     z = d - a if d > a else d + a

@@ -1,6 +1,6 @@
 """The identification problem: the paper's Eq. 8 cost of a transmission-torque model, batched.
 
-Model (MODEL.md §2, the simulator's ``_shaft_torque`` exactly), load side, SI::
+Model: the simulator's own shaft torque (``model.transmission.shaft_torque_nb``), load side::
 
     T_paper   = kL*DZ(dth, alpha) + c*dw                        (paper Eq. 2)
     T_contact = 0 inside the gap (|dth| <= alpha); in contact the Eq. 2 torque, clamped so it
@@ -20,32 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ema_cli._numba import njit
+from ema_cli.model.transmission import FORMS, shaft_torque, shaft_torque_nb
 
-FORMS = ("contact", "paper")
 PARAM_UNITS = {"kL": "N*m/rad", "alpha": "rad", "c": "N*m*s/rad"}
 
 
-@njit(cache=True, inline="always")
-def torque_nb(k, alpha, c, contact, dth, dw):
-    """One sample of the transmission torque [N*m]; mirrors ``sim.kernel._shaft_torque``."""
-    if dth > alpha:
-        spring = k * (dth - alpha)
-    elif dth < -alpha:
-        spring = k * (dth + alpha)
-    else:
-        spring = 0.0
-    if alpha > 0.0 and contact:
-        if dth > alpha:
-            t = spring + c * dw
-            return t if t > 0.0 else 0.0
-        if dth < -alpha:
-            t = spring + c * dw
-            return t if t < 0.0 else 0.0
-        return 0.0
-    return spring + c * dw
-
-
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cost_batch_nb(X, dth, dw, tq, c_fixed, contact, out):
     """Eq. 8 for every row of ``X[n_pop, 2 or 3]`` (kL, alpha[, c]) into ``out[n_pop]``.
 
@@ -63,27 +43,9 @@ def cost_batch_nb(X, dth, dw, tq, c_fixed, contact, out):
             continue
         s = 0.0
         for i in range(n):
-            r = tq[i] - torque_nb(k, alpha, c, contact, dth[i], dw[i])
+            r = tq[i] - shaft_torque_nb(k, alpha, c, contact, dth[i], dw[i])
             s += r * r
         out[p] = s
-
-
-def dead_zone(dth: np.ndarray, alpha: float) -> np.ndarray:
-    """DZ(dth, alpha) = sign(dth)*max(|dth| - alpha, 0) [rad]."""
-    return np.sign(dth) * np.maximum(np.abs(dth) - alpha, 0.0)
-
-
-def torque_model(
-    dth: np.ndarray, dw: np.ndarray, kL: float, alpha: float, c: float, form: str
-) -> np.ndarray:
-    """Transmission torque [N*m] of one parameter set for arrays of dth [rad] and dw [rad/s]."""
-    t = kL * dead_zone(dth, alpha) + c * dw
-    if form == "contact" and alpha > 0.0:
-        t = np.where(dth > alpha, np.maximum(t, 0.0),
-                     np.where(dth < -alpha, np.minimum(t, 0.0), 0.0))
-    elif form != "paper" and form != "contact":
-        raise ValueError(f"form must be one of {FORMS}, got {form!r}")
-    return t
 
 
 @dataclass(frozen=True)
@@ -147,7 +109,7 @@ class TorqueProblem:
     def model_torque(self, x: np.ndarray) -> np.ndarray:
         """T_model [N*m] at the data for one parameter vector."""
         p = self.full_params(x)
-        return torque_model(self.dth, self.dw, p["kL"], p["alpha"], p["c"], self.form)
+        return shaft_torque(self.dth, self.dw, p["kL"], p["alpha"], p["c"], self.form)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """T_meas - T_model [N*m] for one parameter vector."""

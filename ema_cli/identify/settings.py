@@ -24,14 +24,14 @@ from ema_cli.identify.data import CSV_COLUMNS
 DEFAULT_K_RANGE = (500.0, 700.0)  # kL search range, paper §3.1 [N*m/rad]
 DEFAULT_ALPHA_RANGE = (0.002, 0.004)  # alpha search range, paper §3.1 [rad]
 DEFAULT_C_RANGE = (0.0, 5.0)  # c search range when fitted (truth ~0.773) [N*m*s/rad]
-TRUE_KL = 590.0  # synthetic data: stiffness, MODEL.md §7 [N*m/rad]
-TRUE_ALPHA = 0.003  # synthetic data: half backlash, MODEL.md §7 [rad]
+TRUE_KL = 590.0  # synthetic data: stiffness, docs/model.md §8 [N*m/rad]
+TRUE_ALPHA = 0.003  # synthetic data: half backlash, docs/model.md §8 [rad]
 CHIRP_AMPLITUDE_DEG = 5.0  # synthetic chirp amplitude [deg]
 CHIRP_F0_HZ = 0.5  # chirp start frequency [Hz]
 CHIRP_F1_HZ = 8.0  # chirp end frequency [Hz]
 CHIRP_SWEEP_S = 4.0  # chirp sweep time [s]
 DATA_DURATION_S = 4.0  # simulated time [s]
-DATA_DT_S = 1e-5  # integration step of the data simulation [s] (MODEL.md §5)
+DATA_DT_S = 1e-5  # integration step of the data simulation [s] (docs/model.md §6)
 SAMPLE_INTERVAL_S = 1e-3  # sample interval of the identification data: 4,001 samples [s]
 
 Method = Literal["ga", "ga-paper", "exact"]
@@ -99,7 +99,7 @@ class GASettings(Strict):
 
 
 class SyntheticSettings(Strict):
-    """How synthetic data are generated (MODEL.md §7), edge units in the names."""
+    """How synthetic data are generated (docs/model.md §8), edge units in the names."""
 
     kL: float = Field(TRUE_KL, gt=0, description="true stiffness [N*m/rad]")
     alpha: float = Field(TRUE_ALPHA, ge=0, description="true half backlash [rad]")

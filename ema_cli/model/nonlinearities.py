@@ -1,4 +1,4 @@
-"""Nonlinearity types placed at signal points, and the paper's nine names as aliases (MODEL.md §4).
+"""Nonlinearity types at signal points; the paper's nine names as aliases (docs/model.md §5).
 
 Type and location are separate: a dead zone can sit at the amplifier, the speed sensor, the
 position sensor or the transmission (where it is the backlash dead band); a saturation at either

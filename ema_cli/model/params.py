@@ -1,4 +1,4 @@
-"""The parameter table of the reference EMA (MODEL.md §3): name, SI unit, default, meaning.
+"""The parameter table of the reference EMA (docs/model.md §4): name, SI unit, default, meaning.
 
 Everything else is derived from this one table: the kernel's column indices, the CSV/manifest
 names, the GA bounds and the `--set plant.NAME=VALUE` overrides. All values are SI.

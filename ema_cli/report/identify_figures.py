@@ -17,6 +17,7 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
+from ema_cli.model.transmission import shaft_torque  # noqa: E402
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json  # noqa: E402
 
 if TYPE_CHECKING:
@@ -173,7 +174,7 @@ def fit_figure(res: IdentificationResult) -> Figure:
             label="identified model (with c·dω)")
     lim = float(np.max(np.abs(data.dth)))
     xs = np.linspace(-lim, lim, 401)
-    spring = p["kL"] * np.sign(xs) * np.maximum(np.abs(xs) - p["alpha"], 0.0)
+    spring = shaft_torque(xs, np.zeros_like(xs), p["kL"], p["alpha"], 0.0, "paper")
     ax.plot(xs * a_scale, spring, "C3", lw=1.4,
             label=f"kL·DZ(dθ, α): kL = {p['kL']:.4g}, α = {p['alpha'] * a_scale:.4g} mrad")
     for s in (-1, 1):

@@ -20,7 +20,7 @@ from ema_cli.sim.kernel import KERNELS, LANES
 from ema_cli.sim.signals import InputSignal, Reference, sample
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 
-DEFAULT_DT = 1e-5  # integration step [s] (MODEL.md §5)
+DEFAULT_DT = 1e-5  # integration step [s] (docs/model.md §6)
 DEFAULT_OUTPUT_INTERVAL = 1e-4  # recorded-signal interval [s]
 RESOLUTION_LIMIT = 0.3  # warn when dt * (fastest rate) exceeds this [-] (RK4 stability ~2.8)
 MAX_STEPS = 2_000_000_000  # refuse absurd step counts

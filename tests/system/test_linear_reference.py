@@ -13,7 +13,7 @@ from tests.conftest import LINEAR_OVERRIDES, run_rows
 
 
 def linear_ss(p: dict[str, float]) -> control.StateSpace:
-    """The loop of MODEL.md §2 with every nonlinearity removed, written out by hand.
+    """The loop of docs/model.md §2 with every nonlinearity removed, written out by hand.
 
     States [theta_m, w_m, i, theta_L, w_L, xI]; input theta_ref; output theta_L.
     """

@@ -1,4 +1,4 @@
-"""The issue's accuracy claims on synthetic data (MODEL.md §7, 4,001 samples, the paper's budget).
+"""The issue's accuracy claims on synthetic data (docs/model.md §8, 4,001 samples, paper budget).
 
 Measured on this data (seed 0, SeedSequence(0).spawn(10)):
 * noise-free, matched forms: the improved GA lands within ~1e-13 % of the truth in every seed;

@@ -7,9 +7,10 @@ import pytest
 
 from ema_cli.identify.data import add_noise
 from ema_cli.identify.exact import solve_exact
-from ema_cli.identify.problem import TorqueProblem, torque_model
+from ema_cli.identify.problem import TorqueProblem
 from ema_cli.identify.run import load_data
 from ema_cli.identify.settings import IdentifySettings
+from ema_cli.model.transmission import shaft_torque
 
 BOUNDS = (np.array([500.0, 0.002]), np.array([700.0, 0.004]))
 BOUNDS_C = (np.array([500.0, 0.002, 0.0]), np.array([700.0, 0.004, 5.0]))
@@ -17,7 +18,7 @@ BOUNDS_C = (np.array([500.0, 0.002, 0.0]), np.array([700.0, 0.004, 5.0]))
 
 @pytest.fixture(scope="module")
 def datasets():
-    """Noise-free synthetic data (MODEL.md §7, 4,001 samples) in both damping forms."""
+    """Noise-free synthetic data (docs/model.md §8, 4,001 samples) in both damping forms."""
     return {form: load_data(IdentifySettings(synthetic={"damping": form}))
             for form in ("contact", "paper")}
 
@@ -41,7 +42,7 @@ def test_model_torque_is_the_simulators_torque(datasets, form):
     # at the true parameters the model reproduces the kernel's _shaft_torque to rounding
     data = datasets[form]
     t = data.truth
-    model = torque_model(data.dth, data.dw, t["kL"], t["alpha"], t["c"], form)
+    model = shaft_torque(data.dth, data.dw, t["kL"], t["alpha"], t["c"], form)
     np.testing.assert_allclose(model, data.torque, rtol=0, atol=1e-12)
     prob = problem(data, form)
     assert prob.evaluate(np.array([[t["kL"], t["alpha"]]]))[0] < 1e-20
