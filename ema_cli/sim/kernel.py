@@ -51,7 +51,7 @@ from ema_cli.model.plant import (
 from ema_cli.model.transmission import shaft_torque_nb
 from ema_cli.sim.tables import MET, N_METRICS, N_SIGNALS, SIG
 
-# parameter rows of a chunk's parameter block W[N_PARAMS, lanes]
+# parameter rows (model.params.PARAMS order) of the work array W below
 _R, _L, _KT, _KE = INDEX["R"], INDEX["L"], INDEX["Kt"], INDEX["Ke"]
 _JM, _BM, _M, _JL, _BL = INDEX["Jm"], INDEX["bm"], INDEX["m"], INDEX["JL"], INDEX["bL"]
 _KL, _C, _ALPHA, _DAMP = INDEX["kL"], INDEX["c"], INDEX["alpha"], INDEX["damping"]
@@ -63,12 +63,7 @@ _SIG0, _SIG1, _SIG2 = INDEX["sigma0"], INDEX["sigma1"], INDEX["sigma2"]
 _TLOAD, _KH, _LOCKED = INDEX["T_load"], INDEX["k_h"], INDEX["locked"]
 _TS, _QPOS, _QSPEED = INDEX["Ts"], INDEX["q_pos"], INDEX["q_speed"]
 
-# state rows of W[N_STATES, lanes]
-_X_THM, _X_WM, _X_I = STATE_INDEX["theta_m"], STATE_INDEX["w_m"], STATE_INDEX["i"]
-_X_THL, _X_WL = STATE_INDEX["theta_L"], STATE_INDEX["w_L"]
-_X_Z, _X_XI = STATE_INDEX["z"], STATE_INDEX["xI"]
-
-# signal columns of REC / sig and metric columns of met
+# signal columns (W's recording rows, sig) and metric columns (met)
 _S_BRISTLE_Z = SIG["bristle_z"]
 _S_CURRENT = SIG["current"]
 _S_DOMEGA = SIG["domega"]
@@ -116,6 +111,9 @@ _M_T_END = MET["t_end"]
 # status values, states, metric accumulators, this step's inputs and the recorded values.
 _P0 = 0
 _D0 = _P0 + N_PARAMS
+# 1/m, 1/L, 1/Jm, 1/JL, contact form?, steps per controller sample, sample countdown, held
+# voltage, running?, step it diverged at, is the input a step?, step size, step time, 1/q_pos,
+# 1/q_speed
 (_D_INVM, _D_INVL, _D_INVJM, _D_INVJL, _D_CONTACT, _D_NS, _D_CNT, _D_UH, _D_ALIVE, _D_KEND,
  _D_ISSTEP, _D_STEP, _D_TSTEP, _D_INVQP, _D_INVQS) = range(_D0, _D0 + 15)
 _X0 = _D0 + 15
