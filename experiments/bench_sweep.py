@@ -6,7 +6,8 @@ and prints medians over the repeats of: the end-to-end wall time of ``run_sweep`
 cache lookup -> kernel load -> kernel -> cache writes -> metrics.csv/manifest/summary), the
 kernel time, and the runner's overhead (everything but the kernel) as a share of the kernel
 time. "rest" is the overhead not in a named part: worker start-up and dispatch, chunk
-assembly. Goals (issue 3): wall < 10 s on a 2-core machine, overhead < 20 % of the kernel time.
+assembly. Goals: wall < 2 s on a 2-core machine (kernel v2), overhead < 20 % of the kernel time
+(issue 3, set when the kernel was 3x slower; each goal gets its own verdict).
 
 Usage: ``python experiments/bench_sweep.py [--repeats N] [--backends threads,loky]``; the
 function ``main()`` is what ``experiments/bench.py`` calls.
@@ -32,7 +33,7 @@ from ema_cli.sweep.run import run_sweep
 
 N_JOBS = 1000  # jobs in the benchmark sweep, baseline included
 REPEATS = 3  # repeats per backend; medians are reported
-WALL_GOAL_S = 10.0  # end-to-end goal on 2 cores [s]
+WALL_GOAL_S = 2.0  # end-to-end goal on 2 cores [s]
 OVERHEAD_GOAL = 0.20  # overhead goal, fraction of the kernel time [-]
 BACKENDS = ("threads", "loky")
 
@@ -101,14 +102,15 @@ def main(repeats: int = REPEATS, backends: tuple[str, ...] = BACKENDS) -> dict[s
         med = {k: statistics.median(r[k] for r in runs[backend]) for k in runs[backend][0]}
         share = med["overhead"] / med["kernel"]
         out[backend] = {**med, "overhead_share": share}
-        ok = "OK" if med["wall"] < WALL_GOAL_S and share < OVERHEAD_GOAL else "MISSED"
+        ok_wall = "OK" if med["wall"] < WALL_GOAL_S else "MISSED"
+        ok_share = "OK" if share < OVERHEAD_GOAL else "MISSED"
         print(f"  {backend:8s} wall {med['wall']:5.2f} s  kernel {med['kernel']:5.2f} s  "
               f"overhead {med['overhead']:4.2f} s = {share:5.1%} of kernel "
               f"[plan {med['plan']:.2f}, lookup {med['lookup']:.2f}, kernel load "
               f"{med['warm']:.2f}, cache writes {med['store']:.2f}, outputs "
               f"{med['outputs']:.2f}, rest {med['rest']:.2f}]  (process incl. imports "
-              f"{med['process']:.2f} s)  goals wall < {WALL_GOAL_S:g} s, overhead < "
-              f"{OVERHEAD_GOAL:.0%}: {ok}")
+              f"{med['process']:.2f} s)  wall < {WALL_GOAL_S:g} s: {ok_wall}, overhead < "
+              f"{OVERHEAD_GOAL:.0%}: {ok_share}")
     if len(out) > 1:
         best = min(out, key=lambda b: out[b]["wall"])
         print(f"  fastest local backend: {best} (load average after: {os.getloadavg()[0]:.2f})")
