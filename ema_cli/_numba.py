@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -24,7 +25,9 @@ PACKAGE = Path(__file__).resolve().parent
 KEYED_FOLDERS = ("model", "sim")  # every module in these is read by the compiled kernels
 KEYED_FILES = ("_numba.py", "units.py")
 KEEP_CACHES = 6  # cache folders of other source versions kept (most recent first) [-]
-JIT_IMPORT = "ema_cli._numba"
+JIT_IMPORT = re.compile(r"^\s*(?:from\s+ema_cli\._numba\s+import|import\s+ema_cli\._numba)",
+                        re.MULTILINE)
+"""An import of this module: the files that have one define compiled code."""
 
 
 def keyed_sources(package: Path = PACKAGE) -> list[Path]:
@@ -33,7 +36,7 @@ def keyed_sources(package: Path = PACKAGE) -> list[Path]:
     for folder in KEYED_FOLDERS:
         files.update((package / folder).glob("*.py"))
     for f in package.rglob("*.py"):
-        if JIT_IMPORT in f.read_text(encoding="utf-8"):
+        if JIT_IMPORT.search(f.read_text(encoding="utf-8")):
             files.add(f)
     return sorted(f for f in files if f.is_file())
 

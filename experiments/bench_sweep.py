@@ -28,8 +28,8 @@ from typing import Any
 
 from ema_cli.config.loader import validate
 from ema_cli.config.schema import StudyConfig
+from ema_cli.report.sweep_report import run_sweep
 from ema_cli.sweep.execute import cpu_count
-from ema_cli.sweep.run import run_sweep
 
 N_JOBS = 1000  # jobs in the benchmark sweep, baseline included
 REPEATS = 3  # repeats per backend; medians are reported

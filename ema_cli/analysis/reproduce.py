@@ -1,7 +1,9 @@
-"""Run an experiment batch (the paper reproduction): studies, thresholds, identification, claims.
+"""The computations of an experiment batch (the paper reproduction): thresholds, ranking, claims.
 
-Compute only: returns a :class:`Reproduction` with every table and number; ``report.reproduce``
-writes REPORT.md, claims.csv and the figures.
+Compute only: the steps fill a :class:`Reproduction` with every table and number.
+``report.reproduce_report.run_experiment`` runs the batch (the studies' sweeps and the
+identification write their folders) and ``write_reproduction`` writes REPORT.md, claims.csv and
+the figures.
 """
 
 from __future__ import annotations
@@ -16,12 +18,8 @@ import numpy as np
 import pandas as pd
 
 from ema_cli.analysis.claims import Verdict, evaluate_claims
-from ema_cli.analysis.threshold import (
-    Criterion,
-    ThresholdResult,
-    find_threshold,
-    simulation_evaluator,
-)
+from ema_cli.analysis.threshold import ThresholdResult, find_threshold, simulation_evaluator
+from ema_cli.config.criteria import Criterion
 from ema_cli.config.experiment import ExperimentConfig, ThresholdSpec
 from ema_cli.config.loader import input_signal, load_config, read_yaml, validate
 from ema_cli.config.schema import StudyConfig
@@ -73,14 +71,15 @@ def load_experiment(path: Path) -> ExperimentConfig:
     return exp
 
 
-def _study_config(path: Path, rel: str) -> tuple[StudyConfig, Path]:
+def study_config(path: Path, rel: str) -> tuple[StudyConfig, Path]:
+    """The study config ``rel`` (relative to the experiment file ``path``) and its path."""
     p = path.parent / rel
     return load_config(p, (), model=StudyConfig), p
 
 
 def compute_threshold(path: Path, spec: ThresholdSpec) -> ThresholdOutcome:
     """Run one threshold search of the batch."""
-    cfg, cpath = _study_config(path, spec.config)
+    cfg, cpath = study_config(path, spec.config)
     signal = input_signal(cfg.input, cpath.parent, cfg.load)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != spec.vary}
     ev = simulation_evaluator(spec.vary, cfg.plant_overrides(), nls, signal,
@@ -128,45 +127,28 @@ def compute_ranking(rep: Reproduction) -> pd.DataFrame:
     return out
 
 
-def run_identification_step(settings: dict[str, Any], out: Path | None) -> dict[str, Any]:
-    """The paper's §3.1 identification through ``ema identify``'s library entry point."""
-    from ema_cli.identify.run import identification_summary
-
-    return identification_summary(settings, out)
-
-
-def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
-                   progress: bool = True, log: Any = print) -> Reproduction:
-    """Run the whole batch into ``out``; returns the computed Reproduction."""
-    from ema_cli.sweep.run import run_sweep
-
-    exp = load_experiment(path)
-    rep = Reproduction(exp, path)
+def compute_thresholds(rep: Reproduction, log: Any = print) -> None:
+    """Run every threshold search of the batch into ``rep`` (and its scalars)."""
     t0 = time.perf_counter()
-    for s in exp.studies:
-        cfg, cpath = _study_config(path, s.config)
-        log(f"study {s.id}: {cpath}")
-        res = run_sweep(cfg, out / "studies" / s.id, n_jobs=n_jobs, progress=progress,
-                        base_dir=cpath.parent, source=str(cpath))
-        rep.studies[s.id] = res.metrics
-        rep.sweeps[s.id] = res
-    rep.timings["studies"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    for t in exp.thresholds:
+    for t in rep.exp.thresholds:
         log(f"threshold {t.id}: {t.vary} over {t.range[0]:g}..{t.range[1]:g}")
-        outcome = compute_threshold(path, t)
+        outcome = compute_threshold(rep.path, t)
         rep.thresholds.append(outcome)
         rep.scalars[t.id] = outcome.value
     rep.timings["thresholds"] = time.perf_counter() - t0
-    if exp.identification is not None:
-        t0 = time.perf_counter()
-        log("identification (paper §3.1)")
-        rep.identification = run_identification_step(exp.identification.settings,
-                                                     out / "identification")
-        for k, v in rep.identification.items():
-            if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v):
-                rep.scalars[f"identification.{k}"] = float(v)
-        rep.timings["identification"] = time.perf_counter() - t0
+
+
+def add_identification(rep: Reproduction, flat: dict[str, Any]) -> None:
+    """Record the identification's flat scalars (``identification.<key>`` for the claims)."""
+    rep.identification = flat
+    for k, v in flat.items():
+        if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v):
+            rep.scalars[f"identification.{k}"] = float(v)
+
+
+def conclude(rep: Reproduction) -> Reproduction:
+    """Rank the studies (if asked) and evaluate every claim; returns ``rep``."""
+    exp = rep.exp
     if exp.ranking is not None:
         rep.ranking = compute_ranking(rep)
         order = [str(s) for s in rep.ranking["study"]]

@@ -11,7 +11,6 @@ benign end, so a metric that fails and later passes again does not move it past 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -19,52 +18,15 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from ema_cli.config.criteria import DEFAULT_RTOL, Criterion
 from ema_cli.config.loader import resolve_params
 from ema_cli.errors import EmaError
 from ema_cli.model.params import to_row
 from ema_cli.sim.runner import plan_steps, simulate_batch
 from ema_cli.sim.signals import InputSignal, sample
-from ema_cli.sim.tables import METRIC_BY_EDGE
 
 GRID_POINTS = 12  # magnitudes evaluated per refinement round (one kernel batch)
-DEFAULT_RTOL = 1e-3  # stop when the bracket is narrower than this, relative to its upper end
 MAX_ROUNDS = 12  # refinement rounds at most
-
-_REQ = re.compile(r"^\s*([A-Za-z0-9_]+)\s*(<=|>=|<|>)\s*([-+0-9.eE]+|inf)\s*$")
-
-
-@dataclass(frozen=True)
-class Criterion:
-    """``metric op limit`` on one metric column in edge units; NaN or diverged fails."""
-
-    metric: str
-    op: Literal["<=", ">=", "<", ">"]
-    limit: float
-
-    @classmethod
-    def parse(cls, text: str) -> Criterion:
-        """Parse ``METRIC<=VALUE`` (or >=, <, >)."""
-        m = _REQ.match(text)
-        if not m:
-            raise EmaError(f"requirement {text!r} must look like METRIC<=VALUE (or >=, <, >)")
-        crit = cls(m.group(1), m.group(2), float(m.group(3)))  # type: ignore[arg-type]
-        crit.check()
-        return crit
-
-    def check(self) -> None:
-        if self.metric not in METRIC_BY_EDGE:
-            raise EmaError(f"unknown metric '{self.metric}'; expected one of "
-                           f"{', '.join(METRIC_BY_EDGE)}")
-
-    def passes(self, values: np.ndarray) -> np.ndarray:
-        v = np.asarray(values, dtype=float)
-        with np.errstate(invalid="ignore"):
-            ok = {"<=": v <= self.limit, ">=": v >= self.limit,
-                  "<": v < self.limit, ">": v > self.limit}[self.op]
-        return ok & np.isfinite(v)
-
-    def __str__(self) -> str:
-        return f"{self.metric} {self.op} {self.limit:g}"
 
 
 @dataclass

@@ -27,8 +27,8 @@ def reproduce_cmd(
 ) -> None:
     """Run every study, threshold and identification of the batch, evaluate its claims and
     write REPORT.md, claims.csv, the figures and a manifest. Exits 1 if any claim fails."""
-    from ema_cli.analysis.reproduce import load_experiment, run_experiment
-    from ema_cli.report.reproduce_report import write_reproduction
+    from ema_cli.analysis.reproduce import load_experiment
+    from ema_cli.report.reproduce_report import run_experiment, write_reproduction
 
     exp = load_experiment(experiment)
     folder = out if out is not None else new_run_dir(exp.name, {"exp": exp.model_dump()})

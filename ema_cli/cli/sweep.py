@@ -13,10 +13,10 @@ from rich.table import Table
 from ema_cli.cli.common import console, err_console, handle_errors, parse_assignments
 from ema_cli.cli.main import app
 from ema_cli.errors import EmaError
-from ema_cli.report.sweep_report import metric_label
+from ema_cli.report.sweep_report import metric_label, run_sweep
 from ema_cli.sweep.expand import check_size
 from ema_cli.sweep.plan import fmt, plan_sweep
-from ema_cli.sweep.run import FAILED, SweepResult, run_sweep
+from ema_cli.sweep.run import FAILED, SweepResult
 from ema_cli.sweep.study import load_study
 
 MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)

@@ -10,9 +10,10 @@ import typer
 import yaml
 from rich.table import Table
 
-from ema_cli.analysis.threshold import DEFAULT_RTOL, Criterion, find_threshold, simulation_evaluator
+from ema_cli.analysis.threshold import find_threshold, simulation_evaluator
 from ema_cli.cli.common import console, handle_errors, parse_assignments
 from ema_cli.cli.main import app
+from ema_cli.config.criteria import DEFAULT_RTOL, Criterion
 from ema_cli.config.loader import input_signal, load_config
 from ema_cli.config.schema import StudyConfig
 from ema_cli.errors import EmaError

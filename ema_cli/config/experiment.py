@@ -10,8 +10,8 @@ from typing import Any, Literal
 
 from pydantic import Field, field_validator
 
-from ema_cli.analysis.claims import Claim
-from ema_cli.analysis.threshold import DEFAULT_RTOL, Criterion
+from ema_cli.config.claims import Claim
+from ema_cli.config.criteria import DEFAULT_RTOL, Criterion
 from ema_cli.config.schema import Strict
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import lookup

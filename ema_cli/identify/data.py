@@ -9,11 +9,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ema_cli.errors import EmaError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 CSV_COLUMNS = ("t_s", "dtheta_rad", "domega_rad_s", "torque_nm")
 """Columns of an identification CSV: time [s], deflection [rad], its rate [rad/s], torque [N*m]."""
@@ -57,6 +60,13 @@ class IdentData:
             "noise_std_nm": self.noise_std,
             "truth": self.truth,
         }
+
+    def to_frame(self) -> pd.DataFrame:
+        """The samples as a DataFrame with the canonical columns (:data:`CSV_COLUMNS`)."""
+        import pandas as pd
+
+        return pd.DataFrame(dict(zip(CSV_COLUMNS, (self.t, self.dth, self.dw, self.torque),
+                                     strict=True)))
 
     def contact_fraction(self, alpha: float) -> float:
         """Fraction of samples with |dth| > alpha (outside the gap) [-]."""
@@ -184,13 +194,3 @@ def check_exercises_gap(data: IdentData, alpha_lo: float, source: str) -> None:
             f"at least {MIN_CONTACT_SAMPLES} are needed: the data do not reach gear contact, "
             f"so the dead band lies outside the alpha range or the excitation is too small")
 
-
-def write_example_csv(path: str | Path, data: IdentData) -> None:
-    """Write ``data`` as an identification CSV with the canonical columns (for examples/tests)."""
-    import pandas as pd
-
-    from ema_cli.report.rundir import write_csv
-
-    frame = pd.DataFrame({"t_s": data.t, "dtheta_rad": data.dth, "domega_rad_s": data.dw,
-                          "torque_nm": data.torque})
-    write_csv(Path(path), frame, float_format="%.17g")

@@ -12,7 +12,6 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -362,12 +361,22 @@ def _flat(res: IdentificationResult, prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def identification_summary(
+@dataclass
+class IdentificationSummary:
+    """Flat scalars of an identification (for the reproduction's claims) and the results they
+    came from: ``results[""]`` is the requested method's, ``results["ga-paper"]`` the paper-mode
+    GA's on the same data and seeds (when it ran). The report layer writes each result's folder
+    (``out`` and ``out/<key>``)."""
+
+    scalars: dict[str, Any]
+    results: dict[str, IdentificationResult]
+
+
+def summarize_identification(
     settings: Mapping[str, Any] | IdentifySettings,
-    out: Path | None = None,
     with_paper_mode: bool = True,
     with_mismatch: bool = True,
-) -> dict[str, Any]:
+) -> IdentificationSummary:
     """Run an identification and return flat scalars (for the paper reproduction and claims).
 
     ``settings``: an IdentifySettings or a mapping validated into one (EmaError on bad keys).
@@ -378,12 +387,10 @@ def identification_summary(
     ``exact_wall_time_s``. With ``with_paper_mode`` (and a method other than ga-paper) the
     paper-mode GA runs on the same data and seeds: ``paper_mode_P_error_pct_median`` / ``_worst``
     etc. With ``with_mismatch`` the other torque form is fitted by least squares to the same
-    data: ``mismatch_P_bias_pct`` (signed % vs truth; synthetic data only).
-    ``out``: when given, the identify outputs are written there (and the paper-mode run's in
-    ``out/ga-paper``).
+    data: ``mismatch_P_bias_pct`` (signed % vs truth; synthetic data only). Writes nothing
+    (``report.identify_figures.identification_summary`` also writes the folders).
     """
     from ema_cli.config.loader import validate
-    from ema_cli.report.identify_figures import write_identification
 
     if not isinstance(settings, IdentifySettings):
         settings = validate(IdentifySettings, dict(settings), "identification settings")
@@ -398,18 +405,16 @@ def identification_summary(
         "exact_wall_time_s": res.optimum.wall_time_s,
     }
     flat.update(_flat(res))
-    if out is not None:
-        write_identification(res, Path(out), command="identify (library)")
+    results = {"": res}
     if with_paper_mode and settings.method != "ga-paper":
         paper = run_identification(settings.model_copy(update={"method": "ga-paper"}),
                                    data=res.data)
         flat.update(_flat(paper, "paper_mode_"))
-        if out is not None:
-            write_identification(paper, Path(out) / "ga-paper", command="identify (library)")
+        results["ga-paper"] = paper
     if with_mismatch and res.truth is not None:
         other = "paper" if settings.model == "contact" else "contact"
         mm = solve_exact(build_problem(settings.model_copy(update={"model": other}), res.data))
         flat["mismatch_model"] = other
         for j, n in enumerate(res.names):
             flat[f"mismatch_{n}_bias_pct"] = float(100.0 * (mm.x[j] / res.truth[n] - 1.0))
-    return flat
+    return IdentificationSummary(flat, results)

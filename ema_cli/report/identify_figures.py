@@ -1,11 +1,14 @@
 """Figures and the run folder of `ema identify`: convergence, fit, JSON/CSV tables, manifest.
 
 The figure functions take an ``IdentificationResult`` and return a Figure (no file I/O);
-:func:`write_identification` writes the whole output folder through ``report.rundir``.
+:func:`write_identification` writes the whole output folder through ``report.rundir``;
+:func:`identification_summary` runs ``identify.run.summarize_identification`` and writes its
+folders; :func:`write_example_csv` writes identification data as a CSV.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,11 +20,14 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
+from ema_cli.identify.run import summarize_identification  # noqa: E402
 from ema_cli.model.transmission import shaft_torque  # noqa: E402
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json  # noqa: E402
 
 if TYPE_CHECKING:
+    from ema_cli.identify.data import IdentData
     from ema_cli.identify.run import IdentificationResult
+    from ema_cli.identify.settings import IdentifySettings
 
 LOG_FLOOR_DECADES = 30  # J plots on a log axis are floored this many decades below the start
 REL_FLOOR_PCT = 1e-14  # distances to the optimum below this (rounding) are drawn at it [%]
@@ -221,3 +227,24 @@ def write_identification(
         seeds=f"np.random.SeedSequence({res.settings.seed}).spawn({res.settings.runs})",
         wall_time_s=res.wall_time_s, outputs=list(OUTPUT_FILES), **fields))
     return list(OUTPUT_FILES)
+
+
+def identification_summary(
+    settings: Mapping[str, Any] | IdentifySettings,
+    out: Path | None = None,
+    with_paper_mode: bool = True,
+    with_mismatch: bool = True,
+) -> dict[str, Any]:
+    """``identify.run.summarize_identification`` (its flat scalars are returned) and, when
+    ``out`` is given, the identify outputs written there (the paper-mode run's in
+    ``out/ga-paper``)."""
+    summary = summarize_identification(settings, with_paper_mode, with_mismatch)
+    if out is not None:
+        for sub, res in summary.results.items():
+            write_identification(res, Path(out) / sub, command="identify (library)")
+    return summary.scalars
+
+
+def write_example_csv(path: str | Path, data: IdentData) -> None:
+    """Write ``data`` as an identification CSV with the canonical columns (for examples/tests)."""
+    write_csv(Path(path), data.to_frame(), float_format="%.17g")

@@ -1,25 +1,68 @@
-"""Write a reproduction: paper figures, threshold plots, claims.csv, REPORT.md, manifest."""
+"""Run and write a reproduction: study sweeps, identification, paper figures, threshold plots,
+claims.csv, REPORT.md, manifest.
+
+:func:`run_experiment` runs the batch (its sweeps and identification write their folders under
+``out``; the rest is computed by ``analysis.reproduce``); :func:`write_reproduction` writes the
+report.
+"""
 
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from ema_cli.analysis.claims import verdicts_frame
-from ema_cli.analysis.reproduce import Reproduction
+from ema_cli.analysis.reproduce import (
+    Reproduction,
+    add_identification,
+    compute_thresholds,
+    conclude,
+    load_experiment,
+    study_config,
+)
 from ema_cli.config.experiment import StudySpec
 from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
+from ema_cli.report.identify_figures import identification_summary
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
+from ema_cli.report.sweep_report import run_sweep
 from ema_cli.report.threshold_figures import threshold_figure
 
 FIGURE_METRICS = ("t50_s", "overshoot_pct", "settling_time_s", "p2p_err_pos_deg",
                   "ss_err_pos_deg", "iae_pos_deg_s", "peak_load_rate_deg_s",
                   "peak_voltage_cmd_v", "peak_current_a")
 """Metrics listed under each figure of REPORT.md."""
+
+
+def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
+                   progress: bool = True, log: Any = print) -> Reproduction:
+    """Run the whole batch into ``out``; returns the computed Reproduction.
+
+    Each study's sweep folder goes to ``out/studies/<id>``, the identification's to
+    ``out/identification``; :func:`write_reproduction` writes the report itself.
+    """
+    rep = Reproduction(load_experiment(path), path)
+    t0 = time.perf_counter()
+    for s in rep.exp.studies:
+        cfg, cpath = study_config(path, s.config)
+        log(f"study {s.id}: {cpath}")
+        res = run_sweep(cfg, out / "studies" / s.id, n_jobs=n_jobs, progress=progress,
+                        base_dir=cpath.parent, source=str(cpath))
+        rep.studies[s.id] = res.metrics
+        rep.sweeps[s.id] = res
+    rep.timings["studies"] = time.perf_counter() - t0
+    compute_thresholds(rep, log)
+    if rep.exp.identification is not None:
+        t0 = time.perf_counter()
+        log("identification (paper §3.1)")
+        add_identification(rep, identification_summary(rep.exp.identification.settings,
+                                                        out / "identification"))
+        rep.timings["identification"] = time.perf_counter() - t0
+    return conclude(rep)
 
 
 def _g(x: Any) -> str:

@@ -1,60 +1,23 @@
-"""Run folders, atomic file writes and manifests (every output folder describes itself)."""
+"""Run folders, atomic file writes and manifests (every output folder describes itself).
+
+The generic pieces live below every layer: atomic replacement and ``RESULTS_ROOT`` in
+``ema_cli.files``, content hashes in ``ema_cli.hashing``.
+"""
 
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 import os
 import platform
 import subprocess
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from ema_cli import __version__
 from ema_cli.errors import EmaError
-
-RESULTS_ROOT = Path("results")
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_FILE_MODE = 0o666 & ~_umask()  # what open() would give a new file
-
-
-def _json_default(o: Any) -> Any:
-    import numpy as np
-
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.floating):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
-def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Write ``path`` through ``write(tmp)`` into a temporary sibling, then rename it into place."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    os.chmod(tmp, _FILE_MODE)  # mkstemp creates 0600; results are ordinary shared files
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+from ema_cli.files import RESULTS_ROOT, atomic_write
+from ema_cli.hashing import content_hash, json_default
 
 
 def write_text(path: Path, text: str) -> None:
@@ -64,7 +27,7 @@ def write_text(path: Path, text: str) -> None:
 
 def write_json(path: Path, data: Any) -> None:
     """Atomically write JSON (numpy values converted; NaN written as null)."""
-    text = json.dumps(_nan_to_none(data), indent=2, default=_json_default, allow_nan=False)
+    text = json.dumps(_nan_to_none(data), indent=2, default=json_default, allow_nan=False)
     write_text(path, text + "\n")
 
 
@@ -94,12 +57,6 @@ def write_figure(path: Path, fig: Any, dpi: int = 120) -> None:
         atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
     finally:
         plt.close(fig)
-
-
-def content_hash(data: Any, length: int = 12) -> str:
-    """A stable short hash of JSON-serialisable ``data``."""
-    text = json.dumps(data, sort_keys=True, default=_json_default)
-    return hashlib.sha256(text.encode()).hexdigest()[:length]
 
 
 def git_commit() -> str | None:

@@ -9,13 +9,15 @@ Layout of ``results/<name>/<stamp>_<hash>/`` (or ``--out``)::
     figures/*.png             overlays vs time per axis, metrics vs magnitude per axis
     summary.md                the metrics table and the figures
 
-Every file is written atomically (temporary sibling + rename).
+Every file is written atomically (temporary sibling + rename). :func:`run_sweep` runs a sweep
+(``sweep.run.compute_sweep``) and writes this folder as it goes.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,11 +36,12 @@ from ema_cli.report.rundir import (
     write_text,
 )
 from ema_cli.sim.tables import METRIC_BY_EDGE
+from ema_cli.sweep.run import SweepResult, compute_sweep
 from ema_cli.units import DEG
 
 if TYPE_CHECKING:
+    from ema_cli.config.schema import StudyConfig
     from ema_cli.sweep.plan import AxisInfo, Plan
-    from ema_cli.sweep.run import SweepResult
 
 MAX_GROUPS_PER_AXIS = 3  # overlays per axis when other axes vary: first, middle, last value
 MAX_METRIC_LINES = 10  # most lines (combinations of the other axes) in one metric plot
@@ -93,6 +96,62 @@ def metric_label(edge: str) -> str:
     elif math.isclose(col.factor, 1 / DEG**2):
         unit = unit.replace("rad^2", "deg^2")
     return f"{col.description} [{unit}]"
+
+
+def run_sweep(
+    cfg: StudyConfig,
+    out: Path | None = None,
+    n_jobs: int | None = None,
+    backend: str | None = None,
+    force: bool = False,
+    progress: bool = True,
+    *,
+    scheduler: str | None = None,
+    chunk_size: int | None = None,
+    cache_dir: Path | None = None,
+    base_dir: Path | None = None,
+    source: str = "config",
+    overrides: Sequence[tuple[str, Any]] = (),
+    write: bool = True,
+) -> SweepResult:
+    """Run a sweep end to end (``sweep.run.compute_sweep``) and write its outputs.
+
+    out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
+               reused only if it holds an earlier run of the same sweep (resume in place).
+    overrides  the ``--set`` pairs, recorded in the manifest
+    write      False: write nothing (no folder); the time series stay readable from the cache
+
+    The other arguments are ``compute_sweep``'s. The folder is created once the sweep is
+    planned, before any job runs; on Ctrl-C the outputs of the finished jobs are written and
+    KeyboardInterrupt is re-raised. A failed job's error text goes into the manifest.
+    """
+    t_start = time.perf_counter()
+    folder: Path | None = None
+
+    def on_start(plan: Plan) -> None:
+        nonlocal folder
+        if write:
+            folder = prepare_folder(plan, out, overrides)
+
+    def on_finish(result: SweepResult, aborted: bool) -> None:
+        result.folder = folder
+        if folder is None:
+            return
+        timings = result.timings
+        t2 = time.perf_counter()
+        try:
+            write_outputs(result, partial=aborted)
+        except KeyboardInterrupt:  # Ctrl-C while writing: the manifest still says so
+            result.interrupted = True
+            raise
+        finally:
+            timings["outputs"] = time.perf_counter() - t2
+            timings["total"] = time.perf_counter() - t_start
+            write_manifest(result, overrides)
+
+    return compute_sweep(cfg, n_jobs, backend, force, progress, scheduler=scheduler,
+                         chunk_size=chunk_size, cache_dir=cache_dir, base_dir=base_dir,
+                         source=source, on_start=on_start, on_finish=on_finish)
 
 
 def prepare_folder(plan: Plan, out: Path | None, overrides: Sequence[tuple[str, Any]]) -> Path:

@@ -11,7 +11,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from ema_cli.analysis.threshold import Criterion, ThresholdResult  # noqa: E402
+from ema_cli.analysis.threshold import ThresholdResult  # noqa: E402
+from ema_cli.config.criteria import Criterion  # noqa: E402
 from ema_cli.sim.tables import METRIC_BY_EDGE  # noqa: E402
 
 

@@ -14,11 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ema_cli._numba import CACHE_KEY as KERNEL_KEY
 from ema_cli.errors import EmaError
 from ema_cli.model.params import INDEX, N_PARAMS, equivalent_inertia, to_row
 from ema_cli.sim.kernel import KERNELS, LANES
 from ema_cli.sim.signals import InputSignal, Reference, sample
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
+
+__all__ = ["KERNEL_KEY", "BatchResult", "simulate", "simulate_batch"]
 
 DEFAULT_DT = 1e-5  # integration step [s] (docs/model.md §6)
 DEFAULT_OUTPUT_INTERVAL = 1e-4  # recorded-signal interval [s]

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ema_cli.errors import EmaError
-from ema_cli.report.rundir import RESULTS_ROOT
+from ema_cli.files import RESULTS_ROOT
 from ema_cli.sim.tables import N_METRICS, N_SIGNALS
 
 DEFAULT_CACHE_DIR = RESULTS_ROOT / ".cache" / "sweep"

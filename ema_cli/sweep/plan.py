@@ -23,9 +23,9 @@ from ema_cli import __version__
 from ema_cli.config.loader import input_signal, resolve_params
 from ema_cli.config.schema import StudyConfig, SweepAxis
 from ema_cli.errors import EmaError
+from ema_cli.hashing import content_hash
 from ema_cli.model.nonlinearities import OFF, lookup
 from ema_cli.model.params import BY_NAME, to_row
-from ema_cli.report.rundir import content_hash
 from ema_cli.sim.runner import plan_steps, resolution_warnings, simulate_batch
 from ema_cli.sim.signals import InputSignal, sample
 from ema_cli.sim.tables import MET, SIG, SIGNALS
@@ -60,12 +60,12 @@ def fmt(value: float | str) -> str:
 
 @functools.cache
 def simulator_fingerprint() -> str:
-    """The ema version and the hash of the simulator's sources (``ema_cli._numba.CACHE_KEY``,
+    """The ema version and the hash of the simulator's sources (``sim.runner.KERNEL_KEY``,
     the key of the compiled kernels too): part of every job key, so editing the model or the
     simulator makes the job cache miss."""
-    from ema_cli._numba import CACHE_KEY
+    from ema_cli.sim.runner import KERNEL_KEY
 
-    return hashlib.sha256(f"{__version__}:{CACHE_KEY}".encode()).hexdigest()[:16]
+    return hashlib.sha256(f"{__version__}:{KERNEL_KEY}".encode()).hexdigest()[:16]
 
 
 def signal_identity(sig: InputSignal) -> dict[str, Any]:

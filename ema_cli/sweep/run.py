@@ -1,14 +1,15 @@
-"""The sweep runner: plan, look up the cache, execute what is missing, report (``run_sweep``).
+"""The sweep runner: plan, look up the cache, execute what is missing (``compute_sweep``).
 
-``run_sweep`` is the library entry point of ``ema sweep`` and of the paper reproduction. It
-returns a :class:`SweepResult`: the metrics table (one row per job), the output folder, and
-access to each job's decimated time series.
+``compute_sweep`` returns a :class:`SweepResult`: the metrics table (one row per job) and
+access to each job's decimated time series. It writes nothing but the job cache; the output
+folder is written by ``report.sweep_report.run_sweep`` (the library entry point of ``ema sweep``
+and of the paper reproduction) through the ``on_start`` / ``on_finish`` hooks.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,8 +45,8 @@ class SweepResult:
     ``status`` (ok | diverged | failed | pending), the swept values in the paper's units (see
     ``plan.axes`` for the columns), every simulator metric in edge units (``sim.tables``), the
     content hash ``key`` and the ``error`` text of a failed job. ``folder`` is the output folder
-    (None if nothing was written). ``timings`` are wall seconds: plan, lookup, warm, execute,
-    kernel (summed over workers), store, outputs, total.
+    (None if nothing was written; the report layer sets it). ``timings`` are wall seconds:
+    plan, lookup, warm, execute, kernel (summed over workers), store, outputs, total.
     """
 
     plan: Plan
@@ -156,9 +157,8 @@ class _Progress:
             self.bar.stop()
 
 
-def run_sweep(
+def compute_sweep(
     cfg: StudyConfig,
-    out: Path | None = None,
     n_jobs: int | None = None,
     backend: str | None = None,
     force: bool = False,
@@ -169,14 +169,12 @@ def run_sweep(
     cache_dir: Path | None = None,
     base_dir: Path | None = None,
     source: str = "config",
-    overrides: Sequence[tuple[str, Any]] = (),
-    write: bool = True,
+    on_start: Callable[[Plan], None] | None = None,
+    on_finish: Callable[[SweepResult, bool], None] | None = None,
 ) -> SweepResult:
-    """Run a sweep end to end and write its outputs.
+    """Run every job of a sweep (finished ones from the cache) and return the result.
 
     cfg        validated StudyConfig (``load_config(path, overrides, StudyConfig)``)
-    out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
-               reused only if it holds an earlier run of the same sweep (resume in place).
     n_jobs     workers; None: ``cfg.parallel.n_jobs`` (None there: all cores); the dask
                backend uses every thread of the cluster instead
     backend    auto | loky | threads | dask; None: ``cfg.parallel.backend``
@@ -187,15 +185,16 @@ def run_sweep(
     cache_dir  job cache folder (default ``results/.cache/sweep``)
     base_dir   folder relative CSV input profiles are looked up in (the config's folder)
     source     name of the config in error messages
-    overrides  the ``--set`` pairs, recorded in the manifest
-    write      False: write nothing (no folder); the time series stay readable from the cache
+    on_start   ``on_start(plan)``: called once the plan, backend and cache are ready, before
+               any job runs (the report layer creates the output folder here)
+    on_finish  ``on_finish(result, aborted)``: called when execution ends, also on Ctrl-C or
+               an error (``aborted`` True, the result holds the finished jobs) before the
+               exception propagates (the report layer writes the outputs here)
 
-    Finished jobs are stored in the cache as each chunk completes; on Ctrl-C the outputs of
-    the finished jobs are written and KeyboardInterrupt is re-raised. A job whose chunk raised
-    is marked failed (error text in the manifest) and the sweep goes on.
+    Finished jobs are stored in the cache as each chunk completes; on Ctrl-C ``on_finish``
+    runs and KeyboardInterrupt is re-raised. A job whose chunk raised is marked failed (error
+    text in the result) and the sweep goes on. Writes nothing but the job cache.
     """
-    from ema_cli.report import sweep_report
-
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     plan = plan_sweep(cfg, base_dir, source)
@@ -206,7 +205,8 @@ def run_sweep(
     if backend == "dask":
         check_dask(scheduler)
     cache = JobCache(cache_dir)
-    folder = sweep_report.prepare_folder(plan, out, overrides) if write else None
+    if on_start is not None:
+        on_start(plan)
 
     t0 = time.perf_counter()
     n = len(plan.jobs)
@@ -292,19 +292,10 @@ def run_sweep(
         aborted = True
         raise
     finally:
-        result = SweepResult(plan, metrics_frame(plan, metrics, status, errors), folder, cache,
+        result = SweepResult(plan, metrics_frame(plan, metrics, status, errors), None, cache,
                              backend, workers, computed=computed, cached=cached,
                              interrupted=interrupted, timings=timings)
-        if folder is not None:
-            t2 = time.perf_counter()
-            try:
-                sweep_report.write_outputs(result, partial=aborted)
-            except KeyboardInterrupt:  # Ctrl-C while writing: the manifest still says so
-                result.interrupted = True
-                raise
-            finally:
-                timings["outputs"] = time.perf_counter() - t2
-                timings["total"] = time.perf_counter() - t_start
-                sweep_report.write_manifest(result, overrides)
+        if on_finish is not None:
+            on_finish(result, aborted)
         timings["total"] = time.perf_counter() - t_start
     return result

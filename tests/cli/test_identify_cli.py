@@ -11,9 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from ema_cli.cli.main import app
-from ema_cli.identify.data import write_example_csv
 from ema_cli.identify.run import load_data
 from ema_cli.identify.settings import IdentifySettings
+from ema_cli.report.identify_figures import write_example_csv
 
 runner = CliRunner()
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "identify.yaml"

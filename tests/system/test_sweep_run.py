@@ -13,10 +13,10 @@ from typer.testing import CliRunner
 
 import ema_cli.sweep.execute as execute
 from ema_cli.cli.main import app
+from ema_cli.report.sweep_report import run_sweep
 from ema_cli.sim.runner import simulate
 from ema_cli.sim.tables import METRICS
 from ema_cli.sweep.execute import WARM_STEPS
-from ema_cli.sweep.run import run_sweep
 from ema_cli.sweep.study import load_study
 
 runner = CliRunner()
