@@ -510,7 +510,7 @@ def simulate_chunk_nb(P, a, b, ref_pos, ref_vel, load_half, step_info, ref_index
          sig[a:b], met[a:b])
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec,
                     sig, met):
     """The same as :func:`simulate_chunk_nb` for the single row ``a``: a chunk of one lane, its
