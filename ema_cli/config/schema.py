@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
 from ema_cli.model.params import INDEX, check_value, resolve
-from ema_cli.sim.runner import DEFAULT_DT, DEFAULT_OUTPUT_INTERVAL, plan_steps
+from ema_cli.sim.runner import DEFAULT_DT, DEFAULT_OUTPUT_INTERVAL, off_grid, plan_steps
 from ema_cli.sim.tables import METRIC_BY_EDGE
 from ema_cli.units import RPM
 
@@ -233,19 +233,12 @@ class RunConfig(Strict):
             if param in self.plant and getattr(getattr(self, section), key) not in (None, 0.0,
                                                                                      False):
                 raise ValueError(f"{path} and plant.{param} set the same parameter; give one")
-        ts = self.controller.sample_time_s if "Ts" not in self.plant else None
-        if ts is None and "Ts" in self.plant:
-            try:
-                ts = check_value("Ts", self.plant["Ts"]) or None
-            except EmaError:
-                ts = None
-        sim = getattr(self, "simulation", None)
-        if ts is not None and sim is not None:
-            n = ts / sim.dt_s
-            if n < 1 - 1e-9 or abs(n - round(n)) > 1e-9 * max(n, 1.0):
-                raise ValueError(
-                    f"controller.sample_time_s ({ts:g} s) must be a whole multiple of "
-                    f"simulation.dt_s ({sim.dt_s:g} s)")
+        # plant.Ts has passed check_value already (field validators run first)
+        key = "plant.Ts" if "Ts" in self.plant else "controller.sample_time_s"
+        ts = float(check_value("Ts", self.plant_overrides().get("Ts", 0.0)))
+        if off_grid(ts, self.simulation.dt_s):
+            raise ValueError(f"{key} ({ts:g} s) must be a whole multiple of simulation.dt_s "
+                             f"({self.simulation.dt_s:g} s)")
         return self
 
     @field_validator("name")
