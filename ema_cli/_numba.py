@@ -91,4 +91,32 @@ if "NUMBA_DISABLE_PERFORMANCE_WARNINGS" not in os.environ:
     # numba's performance warnings again.
     config.DISABLE_PERFORMANCE_WARNINGS = 1
 
+
+
+def _defer_blas_probe() -> None:
+    """Import ``numba.np.arraymath`` without its BLAS probe (a 0.3 s ``import scipy.linalg``).
+
+    numba imports that module on the first call of any compiled function, even one loaded from
+    the cache, and the module asks at import time whether BLAS is there by importing
+    ``scipy.linalg``: most of the cost of a short ``ema simulate``. scipy is a dependency of
+    this package, so the answer is known to be yes; the probe is answered without the import
+    and the real check is put back at once (numba still calls it before compiling any BLAS
+    function). Our kernels use no BLAS.
+    """
+    import sys
+
+    if "numba.np.arraymath" in sys.modules:
+        return
+    import numba.np.linalg as nplinalg
+
+    real = nplinalg.ensure_blas
+    nplinalg.ensure_blas = lambda: None
+    try:
+        import numba.np.arraymath  # noqa: F401
+    finally:
+        nplinalg.ensure_blas = real
+
+
+_defer_blas_probe()
+
 __all__ = ["CACHE_KEY", "njit", "prange", "source_key"]

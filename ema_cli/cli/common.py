@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
 
+import click
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -35,6 +37,20 @@ def handle_errors(fn: F) -> F:
         except KeyboardInterrupt:
             err_console.print("[yellow]interrupted[/]: finished work was kept")
             raise typer.Exit(130) from None
+        except (typer.Exit, typer.Abort, click.exceptions.ClickException):
+            raise
+        except MemoryError:
+            err_console.print("[bold red]error:[/] out of memory; ask for less (a shorter "
+                              "simulation.duration_s, a larger simulation.output_interval_s, "
+                              "fewer jobs)")
+            raise typer.Exit(1) from None
+        except Exception as exc:  # a bug, not the user's input: one line unless debugging
+            if os.environ.get("EMA_DEBUG"):
+                raise
+            text = escape(" ".join(str(exc).split()))[:300]
+            err_console.print(f"[bold red]error:[/] unexpected {type(exc).__name__}: {text} "
+                              "(a bug in ema; set EMA_DEBUG=1 to see the traceback)")
+            raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]
 
@@ -51,6 +67,31 @@ def parse_assignments(items: list[str] | None, option: str) -> list[tuple[str, s
             raise EmaError(f"{option} expects NAME=VALUE, got {item!r}")
         out.append((key, value))
     return out
+
+
+OUT_HELP = ("Output folder (default: a new folder under results/). It must be new or empty: "
+            "earlier results are never overwritten{resume}.")
+
+
+def out_help(resume: str = "") -> str:
+    """The ``--out`` help text of every command (one policy), with how it resumes if it does."""
+    return OUT_HELP.format(resume=f"; {resume}" if resume else "")
+
+
+def check_number(value: float | int | None, option: str, *, low: float | None = None,
+                 high: float | None = None, low_open: bool = False) -> None:
+    """Refuse a non-finite or out-of-range numeric option, naming it (None: not given)."""
+    if value is None:
+        return
+    import math
+
+    v = float(value)
+    if not math.isfinite(v):
+        raise EmaError(f"{option} must be a finite number, got {value}")
+    if low is not None and (v <= low if low_open else v < low):
+        raise EmaError(f"{option} must be {'>' if low_open else '>='} {low:g}, got {value}")
+    if high is not None and v > high:
+        raise EmaError(f"{option} must be <= {high:g}, got {value}")
 
 
 def is_interactive() -> bool:

@@ -3,34 +3,26 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.table import Table
 
-from ema_cli.cli.common import console, err_console, handle_errors, parse_assignments
-from ema_cli.cli.main import app
-from ema_cli.config.loader import read_yaml, validate
+from ema_cli.cli.common import (
+    check_number,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
 from ema_cli.errors import EmaError
-from ema_cli.identify.problem import PARAM_UNITS
-from ema_cli.identify.run import IdentificationResult, run_identification
-from ema_cli.identify.settings import IdentifySettings
-from ema_cli.report.identify_figures import write_identification
-from ema_cli.report.rundir import new_run_dir
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from ema_cli.identify.run import IdentificationResult
 
 Range = tuple[float, float]
-
-
-def _set(data: dict[str, Any], path: str, value: Any) -> None:
-    """Set a dotted key in nested dicts (CLI options override the YAML config)."""
-    keys = path.split(".")
-    node = data
-    for k in keys[:-1]:
-        nxt = node.get(k)
-        if not isinstance(nxt, dict):
-            nxt = node[k] = {}
-        node = nxt
-    node[keys[-1]] = value
 
 
 def _fmt(v: float | None, digits: int = 6) -> str:
@@ -40,6 +32,8 @@ def _fmt(v: float | None, digits: int = 6) -> str:
 def result_table(res: IdentificationResult) -> Table:
     """Identified (median over runs), truth, |error| % (median / worst), LS optimum ± SE and
     the runs' |distance| to it."""
+    from rich.table import Table
+
     summ = res.summary()
     n_runs = len(res.runs)
     many = n_runs > 1
@@ -65,7 +59,6 @@ def result_table(res: IdentificationResult) -> Table:
     return table
 
 
-@app.command("identify")
 @handle_errors
 def identify_cmd(
     config: Annotated[Path | None, typer.Argument(
@@ -114,14 +107,31 @@ def identify_cmd(
                      "for ga.")] = None,
     bits: Annotated[int | None, typer.Option(
         "--bits", help="Bits per parameter, ga-paper binary coding (20).")] = None,
-    out: Annotated[Path | None, typer.Option(
-        "--out", help="Output folder (default: results/identify/<stamp>_<hash>/).")] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Override a setting by dotted path, e.g. ga.pop=50, synthetic.noise_pct=1; "
+                      "repeatable (the options above win).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
 ) -> None:
     """Identify kL and alpha (and c) from transmission torque data by minimising the paper's
     Eq. 8, J = sum (T_meas - T_model)^2, with a GA, beside the exact least-squares optimum.
     Writes identification.json, runs.csv, history.csv, convergence.png, fit.png and
     manifest.json."""
-    raw: dict[str, Any] = read_yaml(config) if config is not None else {}
+    from ema_cli.api.identification import identify
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.problem import PARAM_UNITS
+    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.report.rundir import check_output
+
+    check_output(out, "identify")
+
+    for value, option in ((k_range, "--k-range"), (alpha_range, "--alpha-range"),
+                          (c_range, "--c-range")):
+        for v in value or ():
+            check_number(v, option, low=0.0)
+    check_number(noise, "--noise", low=0.0)
+    check_number(c, "--c", low=0.0)
+    check_number(pc, "--pc", low=0.0, high=1.0)
+    check_number(pm, "--pm", low=0.0, high=1.0)
     options: dict[str, Any] = {
         "k_range": k_range, "alpha_range": alpha_range, "c_range": c_range, "method": method,
         "runs": runs, "n_jobs": n_jobs, "data": str(data) if data is not None else None,
@@ -129,24 +139,20 @@ def identify_cmd(
         "fit_c": fit_c, "seed": seed, "ga.pop": pop, "ga.generations": generations,
         "ga.pc": pc, "ga.pm": pm, "ga.bits": bits,
     }
-    for path, value in options.items():
-        if value is not None:
-            _set(raw, path, list(value) if isinstance(value, tuple) else value)
-    if columns:
-        _set(raw, "columns", {**raw.get("columns", {}),
-                              **dict(parse_assignments(columns, "--columns"))})
+    pairs: list[tuple[str, Any]] = list(parse_assignments(set_, "--set"))
+    pairs += [(path, list(v) if isinstance(v, tuple) else v) for path, v in options.items()
+              if v is not None]
+    for name, col in parse_assignments(columns, "--columns"):
+        pairs.append((f"columns.{name}", col))
     if c is not None and fit_c is None:
-        _set(raw, "fit_c", False)  # --c fixes c even if the config asked to fit it
-    settings = validate(IdentifySettings, raw, str(config) if config else "options")
+        pairs.append(("fit_c", False))  # --c fixes c even if the config asked to fit it
+    settings = load_config(config, pairs, IdentifySettings)
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
                        "with --data")
-    if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise EmaError(f"output folder '{out}' exists and is not empty; choose another --out")
-
-    res = run_identification(settings)
-    folder = new_run_dir("identify", settings.model_dump(mode="json"), out)
-    write_identification(res, folder, command="identify")
+    ident = identify(settings)
+    res = ident.result
+    folder = ident.save(out)
 
     console.print(result_table(res))
     for w in res.warnings:

@@ -2,20 +2,16 @@
 
 from __future__ import annotations
 
-import math
-
-from rich.table import Table
-
 from ema_cli.cli.common import console, handle_errors
-from ema_cli.cli.main import app
-from ema_cli.model.nonlinearities import PLACEMENTS
-from ema_cli.model.params import PARAMS, resolve
 
 
-@app.command("locations")
 @handle_errors
 def locations_cmd() -> None:
     """The nine nonlinearity locations of the paper: type, location, unit, default, meaning."""
+    from rich.table import Table
+
+    from ema_cli.model.nonlinearities import PLACEMENTS
+
     table = Table(title="Nonlinearities (--nl NAME=VALUE, or type@location=VALUE)")
     for col in ("name", "type", "location", "unit", "default"):
         table.add_column(col, no_wrap=True)
@@ -27,10 +23,15 @@ def locations_cmd() -> None:
     console.print(table)
 
 
-@app.command("params")
 @handle_errors
 def params_cmd() -> None:
     """The model parameter table (SI), as `--set plant.NAME=VALUE` takes it."""
+    import math
+
+    from rich.table import Table
+
+    from ema_cli.model.params import PARAMS, resolve
+
     values = resolve()
     table = Table(title="Model parameters (SI; --set plant.NAME=VALUE)")
     for col in ("name", "value", "unit"):

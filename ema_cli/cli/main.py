@@ -1,10 +1,16 @@
-"""The `ema` command: a typer app with one module per command."""
+"""The `ema` command: a typer app; every command is registered here, explicitly.
+
+Start-up matters (``ema --help`` should answer at once), so the command modules import only
+typer and the CLI helpers at module level; numpy, numba, pandas, matplotlib and the compute code
+are imported inside the command bodies, when a command actually runs.
+"""
 
 from __future__ import annotations
 
 import typer
 
 from ema_cli import __version__
+from ema_cli.cli import identify, locations, reproduce, simulate, sweep, threshold
 
 app = typer.Typer(
     name="ema",
@@ -12,6 +18,7 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    rich_markup_mode=None,  # help texts are literal: "[deg]" and "[s]" are units, not markup
 )
 
 
@@ -29,19 +36,21 @@ def _root(
     """ema: how much backlash, dead zone, saturation and friction can an actuator tolerate?"""
 
 
-def _register() -> None:
-    # Each command module adds itself to `app`; importing them here keeps main.py thin.
-    import importlib
-    import pkgutil
+COMMANDS = (
+    ("simulate", simulate.simulate_cmd),
+    ("sweep", sweep.sweep_cmd),
+    ("validate", sweep.validate_cmd),
+    ("show", sweep.show_cmd),
+    ("threshold", threshold.threshold_cmd),
+    ("identify", identify.identify_cmd),
+    ("reproduce", reproduce.reproduce_cmd),
+    ("locations", locations.locations_cmd),
+    ("params", locations.params_cmd),
+)
+"""(name, function) of every command, in the order ``ema --help`` lists them."""
 
-    import ema_cli.cli as pkg
-
-    for mod in sorted(m.name for m in pkgutil.iter_modules(pkg.__path__)):
-        if mod not in ("main", "common"):
-            importlib.import_module(f"ema_cli.cli.{mod}")
-
-
-_register()
+for _name, _fn in COMMANDS:
+    app.command(_name)(_fn)
 
 
 def main() -> None:

@@ -2,31 +2,23 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-import yaml
-from rich.table import Table
 
-from ema_cli.cli.common import console, err_console, handle_errors, parse_assignments
-from ema_cli.cli.main import app
-from ema_cli.config.loader import load_config, parse_value, resolve_run
-from ema_cli.config.schema import StudyConfig
-from ema_cli.errors import EmaError
-from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
-from ema_cli.model.params import resolve
-from ema_cli.report.figures import tracking_figure
-from ema_cli.report.rundir import (
-    manifest,
-    new_run_dir,
-    write_csv,
-    write_figure,
-    write_json,
-    write_text,
+from ema_cli.cli.common import (
+    check_number,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
 )
-from ema_cli.sim.runner import resolution_warnings, simulate
+from ema_cli.errors import EmaError
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 SUMMARY_METRICS = (
     ("overshoot_pct", "overshoot", "%"),
@@ -45,6 +37,10 @@ SUMMARY_METRICS = (
 
 def check_nl_options(items: list[tuple[str, str]]) -> None:
     """Validate ``--nl NAME=VALUE`` pairs up front so errors name the option."""
+    from ema_cli.config.loader import parse_value
+    from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
+    from ema_cli.model.params import resolve
+
     base = resolve()
     for name, value in items:
         try:
@@ -56,6 +52,8 @@ def check_nl_options(items: list[tuple[str, str]]) -> None:
 
 def metrics_table(row: dict[str, float], title: str) -> Table:
     """A rich table of the key metrics of one run."""
+    from rich.table import Table
+
     table = Table(title=title, show_header=True, header_style="bold")
     table.add_column("metric")
     table.add_column("value", justify="right")
@@ -66,7 +64,6 @@ def metrics_table(row: dict[str, float], title: str) -> Table:
     return table
 
 
-@app.command("simulate")
 @handle_errors
 def simulate_cmd(
     config: Annotated[Path | None, typer.Argument(
@@ -82,55 +79,36 @@ def simulate_cmd(
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="Override any config value by dotted path, e.g. plant.kL=600, "
                       "simulation.output_interval_s=1e-3, input.kind=sine; repeatable.")] = None,
-    out: Annotated[Path | None, typer.Option(
-        "--out", help="Output folder (default: a new folder under results/).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
 ) -> None:
     """Simulate one configuration and write timeseries.csv, metrics.csv, manifest.json and
     tracking.png."""
+    import time
+
+    t_start = time.perf_counter()
+    check_number(step, "--step")
+    check_number(duration, "--duration", low=0.0, low_open=True)
+    check_number(dt, "--dt", low=0.0, low_open=True)
     nl_items = parse_assignments(nl, "--nl")
     check_nl_options(nl_items)
-    overrides: list[tuple[str, object]] = list(parse_assignments(set_, "--set"))
-    if step is not None:
-        overrides += [("input.kind", "step"), ("input.amplitude_deg", step)]
-    if duration is not None:
-        overrides.append(("simulation.duration_s", duration))
-    if dt is not None:
-        overrides.append(("simulation.dt_s", dt))
-    overrides += [(f"nonlinearities.{k}", v) for k, v in nl_items]
-    cfg = load_config(config, overrides, StudyConfig)
-    run = resolve_run(cfg, config.parent if config else None)
-    if out is not None and out.exists() and any(out.iterdir()):
-        raise EmaError(f"output folder '{out}' exists and is not empty; choose another --out")
-    for w in resolution_warnings(run.params, run.dt):
+    overrides = parse_assignments(set_, "--set")
+    from ema_cli.report.rundir import check_output
+
+    check_output(out, "simulate")
+    t_imports = time.perf_counter()
+    from ema_cli.api.simulation import simulate
+
+    run = simulate(config, overrides, nl=dict(nl_items), step_deg=step, duration_s=duration,
+                   dt_s=dt)
+    run.timings["imports"] = time.perf_counter() - t_imports - run.timings["total"]
+    for w in run.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
-
-    t0 = time.perf_counter()
-    res = simulate(run.params, run.signal, run.duration, run.dt, run.output_interval)
-    wall = time.perf_counter() - t0
-
-    folder = new_run_dir(cfg.name, cfg.model_dump(), out)
-    metrics = res.metrics_frame()
-    ts = res.signals_frame(0)
-    write_text(folder / "config.resolved.yaml",
-               yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
-    write_csv(folder / "timeseries.csv", ts, float_format="%.9g")
-    write_csv(folder / "metrics.csv", metrics, float_format="%.9g")
-    nls = ", ".join(f"{k}={v}" for k, v in cfg.nonlinearities.items()) or "no study nonlinearities"
-    options = cfg.describe_options()
-    title = f"{cfg.name}: {run.signal.describe()}, {nls}" + (f", {options}" if options else "")
-    write_figure(folder / "tracking.png", tracking_figure(ts, title))
-    write_json(folder / "manifest.json", manifest(
-        "simulate", seed=cfg.seed, dt_s=run.dt, duration_s=run.duration,
-        output_interval_s=run.output_interval, n_steps=res.n_steps, wall_time_s=wall,
-        steps_per_s=res.n_steps / wall if wall > 0 else None,
-        diverged=bool(res.diverged[0]), input=run.signal.describe(),
-        nonlinearities=dict(cfg.nonlinearities), overrides=[list(o) for o in overrides],
-        parameters_si=run.params, warnings=resolution_warnings(run.params, run.dt)))
-
-    row = metrics.iloc[0].to_dict()
-    console.print(metrics_table(row, title))
-    if res.diverged[0]:
+    folder = run.save(out)
+    row = run.summary
+    console.print(metrics_table(row, run.title))
+    if run.diverged:
         err_console.print(f"[bold red]diverged[/] at t = {row['t_end_s']:.4g} s "
                           "(non-finite or runaway state); try a smaller --dt")
-    console.print(f"{res.n_steps:,} steps in {wall * 1e3:.1f} ms -> {folder}")
-
+    kernel = run.timings["simulation"]
+    console.print(f"{run.batch.n_steps:,} steps in {kernel * 1e3:.1f} ms "
+                  f"(total {time.perf_counter() - t_start:.2f} s) -> {folder}")

@@ -3,27 +3,38 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-import yaml
 from rich.markup import escape
-from rich.table import Table
 
-from ema_cli.cli.common import console, err_console, handle_errors, parse_assignments
-from ema_cli.cli.main import app
+from ema_cli.cli.common import (
+    check_number,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
 from ema_cli.errors import EmaError
-from ema_cli.report.sweep_report import metric_label, run_sweep
-from ema_cli.sweep.expand import check_size
-from ema_cli.sweep.plan import fmt, plan_sweep
-from ema_cli.sweep.run import FAILED, SweepResult
-from ema_cli.sweep.study import load_study
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from ema_cli.sweep.run import SweepResult
 
 MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)
 MAX_TABLE_METRICS = 4  # metric columns of the terminal summary table
 LABEL_WIDTH = 30  # widest "swept values" column of the terminal table [characters]
 METRIC_WIDTH = 7  # narrowest metric column of the terminal table [characters]
 MAX_SHOW_JOBS = 50  # jobs listed by `ema show` unless --all
+MAX_WORKERS = 4096  # --n-jobs above this is refused
+
+
+def check_jobs(n_jobs: int | None, option: str) -> None:
+    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS."""
+    if n_jobs is not None and n_jobs != -1:
+        check_number(n_jobs, option + " (-1: all cores)", low=1, high=MAX_WORKERS)
 
 ConfigArg = Annotated[Path, typer.Argument(help="YAML study config, e.g. configs/deadzone2.yaml.")]
 SetOpt = Annotated[list[str] | None, typer.Option(
@@ -32,13 +43,37 @@ SetOpt = Annotated[list[str] | None, typer.Option(
                   "repeatable.")]
 
 
-def _load(config: Path, set_: list[str] | None):
+def _load(config: Path, set_: list[str] | None) -> tuple[Any, list[tuple[str, str]]]:
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.schema import StudyConfig
+
     overrides = parse_assignments(set_, "--set")
-    return load_study(config, overrides), overrides
+    return load_config(config, overrides, StudyConfig), overrides
+
+
+def default_cache(out: Path | None) -> Path | None:
+    """The job cache of a sweep written to ``out``: the shared ``results/.cache/sweep`` when the
+    output goes under ``results/`` (None), else ``<out>/.cache`` (nothing is written outside an
+    explicit output folder)."""
+    from ema_cli.files import RESULTS_ROOT
+
+    if out is None:
+        return None
+    try:
+        out.resolve().relative_to(RESULTS_ROOT.resolve())
+    except ValueError:
+        return out / ".cache"
+    return None
 
 
 def summary_table(result: SweepResult) -> Table:
     """The closing terminal table: one row per job (capped), key metrics in edge units."""
+    from rich.table import Table
+
+    from ema_cli.report.sweep_report import metric_label
+    from ema_cli.sweep.plan import fmt
+    from ema_cli.sweep.run import FAILED
+
     cfg = result.plan.cfg
     metrics = list(cfg.outputs.metrics)[:MAX_TABLE_METRICS]
     df = result.metrics
@@ -62,7 +97,6 @@ def summary_table(result: SweepResult) -> Table:
     return table
 
 
-@app.command("sweep")
 @handle_errors
 def sweep_cmd(
     config: ConfigArg,
@@ -76,24 +110,27 @@ def sweep_cmd(
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="Dask scheduler address for --backend dask, e.g. "
                             "tcp://10.0.0.5:8786.")] = None,
-    out: Annotated[Path | None, typer.Option(
-        "--out", help="Output folder (default: results/<name>/<timestamp>_<hash>/); an "
-                      "earlier run of the same sweep there is resumed.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help=out_help(
+        "an unfinished run of the same sweep there is resumed"))] = None,
     force: Annotated[bool, typer.Option(
         "--force", help="Recompute every job, even those in the cache.")] = False,
     cache_dir: Annotated[Path | None, typer.Option(
-        "--cache-dir", help="Job cache folder (default: results/.cache/sweep).")] = None,
+        "--cache-dir", help="Job cache folder (default: results/.cache/sweep, or OUT/.cache "
+                            "when --out is outside results/).")] = None,
     progress: Annotated[bool, typer.Option(
         "--progress/--no-progress", help="Show a progress bar with ETA (stderr).")] = True,
 ) -> None:
     """Run a sweep: every job of CONFIG, in parallel, cached and resumable; writes metrics.csv,
     time series, figures, summary.md and manifest.json."""
-    cfg, overrides = _load(config, set_)
+    from ema_cli.report.sweep_report import run_sweep
+
+    check_jobs(n_jobs, "--n-jobs")
     if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
         raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
+    cfg, overrides = _load(config, set_)
     result = run_sweep(cfg, out, n_jobs, backend, force, progress, scheduler=scheduler,
-                       cache_dir=cache_dir, base_dir=config.parent, source=str(config),
-                       overrides=overrides)
+                       cache_dir=cache_dir if cache_dir is not None else default_cache(out),
+                       base_dir=config.parent, source=str(config), overrides=overrides)
     for w in result.plan.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     for n in result.plan.notes:
@@ -110,10 +147,11 @@ def sweep_cmd(
                        "are cached", 1)
 
 
-@app.command("validate")
 @handle_errors
 def validate_cmd(config: ConfigArg, set_: SetOpt = None) -> None:
     """Check CONFIG against the schema (fast: nothing is simulated) and count its jobs."""
+    from ema_cli.sweep.expand import check_size
+
     cfg, _ = _load(config, set_)
     n = check_size(cfg.sweep, str(config))
     axes = "; ".join(f"{a.label} ({a.n_points()} values)" for a in cfg.sweep.axes)
@@ -121,7 +159,6 @@ def validate_cmd(config: ConfigArg, set_: SetOpt = None) -> None:
                   + (" (baseline included)" if cfg.sweep.baseline else ""))
 
 
-@app.command("show")
 @handle_errors
 def show_cmd(
     config: ConfigArg,
@@ -130,6 +167,11 @@ def show_cmd(
                                                      f"{MAX_SHOW_JOBS}).")] = False,
 ) -> None:
     """Print the resolved config (every default filled in) and the jobs it expands to."""
+    import yaml
+    from rich.table import Table
+
+    from ema_cli.sweep.plan import plan_sweep
+
     cfg, _ = _load(config, set_)
     plan = plan_sweep(cfg, config.parent, str(config))
     console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip(),

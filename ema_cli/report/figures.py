@@ -2,22 +2,27 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.figure import Figure
 
 
-def tracking_figure(ts: pd.DataFrame, title: str) -> Figure:
+def subplots(nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = (8.0, 5.0),
+             **kwargs: Any) -> tuple[Figure, Any]:
+    """``plt.subplots`` without pyplot: a Figure no GUI backend or notebook state knows about
+    (cheaper to import, never switches the user's backend, nothing to close)."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
+
+
+def tracking_figure(ts: Mapping[str, Any], title: str) -> Figure:
     """Position and velocity: reference and response (top), their errors (bottom), vs time.
 
-    ``ts`` is a time-series table in edge units (``BatchResult.signals_frame``).
+    ``ts`` maps edge-unit column names (``t_s``, ``theta_ref_deg``, ...) to arrays: a
+    DataFrame or a dict (``BatchResult.signals_frame``, ``api.Simulation.table``).
     """
-    fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
+    fig, axes = subplots(2, 2, figsize=(12, 7), sharex=True)
     t = ts["t_s"]
     ax = axes[0, 0]
     ax.plot(t, ts["theta_ref_deg"], "k--", lw=1.2, label="reference")
@@ -52,14 +57,14 @@ def tracking_figure(ts: pd.DataFrame, title: str) -> Figure:
 
 
 def overlay_figure(
-    series: Sequence[tuple[str, pd.DataFrame]],
+    series: Sequence[tuple[str, Mapping[str, Any]]],
     title: str,
     columns: tuple[str, str] = ("err_pos_deg", "err_vel_deg_s"),
     ylabels: tuple[str, str] = ("position error [deg]", "velocity error [deg/s]"),
     legend_title: str | None = None,
 ) -> Figure:
     """Paper-style overlay: one curve per run of two signals vs time (e.g. Figs 2-10)."""
-    fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    fig, axes = subplots(2, 1, figsize=(10, 7), sharex=True)
     for k, (label, ts) in enumerate(series):
         style = "--" if label.startswith("baseline") else "-"
         for ax, col in zip(axes, columns, strict=True):

@@ -13,16 +13,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-
-from ema_cli.identify.run import summarize_identification  # noqa: E402
-from ema_cli.model.transmission import shaft_torque  # noqa: E402
-from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json  # noqa: E402
+from ema_cli.identify.run import summarize_identification
+from ema_cli.model.transmission import shaft_torque
+from ema_cli.report.figures import subplots
+from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json
 
 if TYPE_CHECKING:
     from ema_cli.identify.data import IdentData
@@ -48,7 +46,7 @@ def _title(res: IdentificationResult) -> str:
 
 
 def _run_color(k: int, n: int) -> Any:
-    return plt.cm.viridis(0.85 * k / max(n - 1, 1))
+    return matplotlib.colormaps["viridis"](0.85 * k / max(n - 1, 1))
 
 
 def convergence_figure(res: IdentificationResult) -> Figure:
@@ -61,7 +59,7 @@ def convergence_figure(res: IdentificationResult) -> Figure:
     if not hists:
         return _profile_only_figure(res)
     n_col = 1 + len(names)
-    fig, axes = plt.subplots(2, n_col, figsize=(5.0 * n_col, 8.4), sharex=True)
+    fig, axes = subplots(2, n_col, figsize=(5.0 * n_col, 8.4), sharex=True)
     opt = res.optimum
     n_h = len(hists)
     starts = [float(h.mean[0]) for h in hists if np.isfinite(h.mean[0]) and h.mean[0] > 0]
@@ -138,7 +136,7 @@ def convergence_figure(res: IdentificationResult) -> Figure:
 
 
 def _profile_only_figure(res: IdentificationResult) -> Figure:
-    fig, ax = plt.subplots(figsize=(7, 4.6))
+    fig, ax = subplots(figsize=(7, 4.6))
     _profile_axes(ax, res)
     ax.set_title("Least-squares profile over alpha (exact method: no GA generations)")
     fig.suptitle(_title(res))
@@ -171,7 +169,7 @@ def fit_figure(res: IdentificationResult) -> Figure:
     resid = data.torque - model
     a_scale = PLOT_UNITS["alpha"][2]
     step = max(1, data.n_samples // MAX_FIT_POINTS)
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    fig, axes = subplots(1, 3, figsize=(16, 4.8))
 
     ax = axes[0]
     dth = data.dth[::step] * a_scale

@@ -11,6 +11,7 @@ import json
 import os
 import platform
 import subprocess
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -50,13 +51,14 @@ def write_csv(path: Path, frame: Any, **kwargs: Any) -> None:
 
 
 def write_figure(path: Path, fig: Any, dpi: int = 120) -> None:
-    """Atomically save a matplotlib Figure as PNG and close it."""
-    import matplotlib.pyplot as plt
+    """Atomically save a matplotlib Figure as PNG (and close it if pyplot manages it)."""
+    import sys
 
     try:
         atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
     finally:
-        plt.close(fig)
+        if "matplotlib.pyplot" in sys.modules:
+            sys.modules["matplotlib.pyplot"].close(fig)
 
 
 def git_commit() -> str | None:
@@ -69,27 +71,115 @@ def git_commit() -> str | None:
     return out.stdout.strip() or None if out.returncode == 0 else None
 
 
-def new_run_dir(name: str, data_for_hash: Any, out: Path | None = None) -> Path:
-    """Create the output folder: ``out`` if given, else ``results/<name>/<stamp>_<hash>/``.
+MARKER = ".ema-run.json"
+"""Written first into every output folder: which command made it, for which inputs, finished."""
 
-    An existing non-empty ``out`` is refused unless it is a previous run of the same kind
-    (the caller decides); folders are never silently overwritten.
+
+def _read_marker(folder: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads((folder / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def check_output(out: Path | None, command: str, fingerprint: str | None = None,
+                 resume: bool = False) -> bool:
+    """Check ``--out`` against the policy of :func:`prepare_output` without creating anything
+    (commands call it before a long computation) -> True if it is a run to resume."""
+    if out is None:
+        return False
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise EmaError(f"--out '{out}' is a file; expected a folder (new or empty)")
+    if out.is_dir():
+        try:
+            busy = any(out.iterdir())
+        except OSError as exc:
+            raise EmaError(f"--out '{out}' cannot be read: {exc.strerror}") from None
+        if busy:
+            mark = _read_marker(out)
+            same = (mark is not None and mark.get("command") == command
+                    and mark.get("fingerprint") == fingerprint)
+            if resume and same and not mark.get("finished"):
+                return True
+            what = (f"a finished `ema {mark.get('command')}` run" if mark and mark.get("finished")
+                    else f"an unfinished `ema {mark.get('command')}` run of other inputs"
+                    if mark else "other files")
+            raise EmaError(f"--out '{out}' already holds {what}; results are never overwritten: "
+                           "choose a new folder or delete that one")
+    parent = next((p for p in out.absolute().parents if p.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise EmaError(f"--out '{out}': '{parent}' is a file, not a folder")
+    return False
+
+
+def prepare_output(command: str, name: str, fingerprint: str, out: Path | None = None,
+                   resume: bool = False) -> tuple[Path, bool]:
+    """The one output-folder policy of every command -> (folder, resumed).
+
+    ``out`` None: a new folder ``results/<name>/<stamp>_<hash>/``. A given ``out`` must be new
+    or empty: earlier results are never overwritten. The one exception, when ``resume`` is
+    set, is an unfinished run of the same ``command`` with the same ``fingerprint`` (the hash of
+    its resolved inputs), which is continued. Errors name ``--out`` and what was expected.
     """
     if out is None:
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        out = RESULTS_ROOT / name / f"{stamp}_{content_hash(data_for_hash, 8)}"
+        out = RESULTS_ROOT / name / f"{stamp}_{fingerprint[:8]}"
         k = 1
         base = out
         while out.exists():
             out = base.with_name(f"{base.name}-{k}")
             k += 1
+    out = Path(out)
+    if check_output(out, command, fingerprint, resume):
+        return out, True
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise EmaError(f"cannot create output folder '{out}': {exc.strerror}", 1) from None
+        raise EmaError(f"--out '{out}': cannot create the folder ({exc.strerror})", 1) from None
     if not os.access(out, os.W_OK):
-        raise EmaError(f"output folder '{out}' is not writable", 1)
-    return out
+        raise EmaError(f"--out '{out}': the folder is not writable", 1)
+    write_json(out / MARKER, {"command": command, "fingerprint": fingerprint,
+                              "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+                              "finished": False})
+    return out, False
+
+
+def finish_output(folder: Path) -> None:
+    """Mark ``folder`` finished: :func:`prepare_output` will never resume into it."""
+    mark = _read_marker(folder) or {}
+    mark["finished"] = True
+    write_json(folder / MARKER, mark)
+
+
+def new_run_dir(name: str, data_for_hash: Any, out: Path | None = None,
+                command: str | None = None) -> Path:
+    """A new output folder for a run that cannot be resumed (see :func:`prepare_output`)."""
+    folder, _ = prepare_output(command or name, name, content_hash(data_for_hash, 16), out)
+    return folder
+
+
+def write_columns(path: Path, columns: Mapping[str, Any], float_format: str = "%.9g") -> None:
+    """Atomically write equal-length columns (numpy arrays or lists) as CSV, without pandas.
+
+    Floats use ``float_format`` with NaN written empty (as pandas does), booleans True/False.
+    """
+    import re
+
+    import numpy as np
+
+    names = list(columns)
+    cols = [np.asarray(columns[n]) for n in names]
+    n = len(cols[0]) if cols else 0
+    if any(len(c) != n for c in cols):
+        raise ValueError("columns of different lengths")
+    fmts = [float_format if c.dtype.kind == "f" else "%d" if c.dtype.kind in "iu" else "%s"
+            for c in cols]
+    row = ",".join(fmts)
+    body = "\n".join(row % r for r in zip(*(c.tolist() for c in cols), strict=True))
+    body = re.sub(r"(?<![^,\n])nan(?![^,\n])", "", body)  # NaN: an empty field
+    write_text(path, ",".join(names) + "\n" + (body + "\n" if n else ""))
 
 
 def manifest(command: str, **fields: Any) -> dict[str, Any]:

@@ -4,23 +4,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from ema_cli.analysis.threshold import ThresholdResult  # noqa: E402
-from ema_cli.config.criteria import Criterion  # noqa: E402
-from ema_cli.sim.tables import METRIC_BY_EDGE  # noqa: E402
+from ema_cli.analysis.threshold import ThresholdResult
+from ema_cli.config.criteria import Criterion
+from ema_cli.report.figures import subplots
+from ema_cli.sim.tables import METRIC_BY_EDGE
 
 
 def threshold_figure(result: ThresholdResult, criteria: Sequence[Criterion], vary_label: str,
                      title: str, log: bool = True) -> Figure:
     """One panel per requirement: every simulated magnitude (pass green, fail red), the limit
     (dashed) and the threshold found (vertical line)."""
-    fig, axes = plt.subplots(len(criteria), 1, figsize=(9, 3.6 * len(criteria)), squeeze=False)
+    fig, axes = subplots(len(criteria), 1, figsize=(9, 3.6 * len(criteria)), squeeze=False)
     h = result.history.sort_values("value")
     for ax, crit in zip(axes[:, 0], criteria, strict=True):
         y = h[crit.metric].to_numpy(dtype=float)

@@ -58,7 +58,9 @@ def test_set_bare_parameter_name_means_plant(tmp_path):
     (["--set", "plant.nope=3"], "plant.nope"),
     (["--set", "plant.kL=abc"], "plant.kL"),
     (["--set", "bogus.x=3"], "--set bogus.x"),
-    (["--dt", "0"], "dt_s"),
+    (["--dt", "0"], "--dt must be > 0"),
+    (["--dt", "nan"], "--dt must be a finite number"),
+    (["--step", "inf"], "--step must be a finite number"),
     (["--dt", "0.3", "--duration", "0.2"], "must not exceed the duration"),
     (["--set", "simulation.output_interval_s=1.5e-5"], "whole multiple of dt"),
     (["--set", "input.kind=square"], "input.kind"),
@@ -79,7 +81,7 @@ def test_missing_config_file_is_named(tmp_path):
 def test_existing_output_folder_is_not_overwritten(tmp_path):
     (tmp_path / "keep.txt").write_text("mine")
     r = invoke("simulate", "--duration", "0.05", "--out", str(tmp_path))
-    assert r.exit_code != 0 and "not empty" in r.output
+    assert r.exit_code != 0 and "never overwritten" in r.output
     assert (tmp_path / "keep.txt").read_text() == "mine"
 
 

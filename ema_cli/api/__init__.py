@@ -1,0 +1,27 @@
+"""The Python API: what the ``ema`` commands do, for notebooks and scripts.
+
+    >>> from ema_cli.api import simulate, sweep, identify, threshold
+    >>> run = simulate(nl={"deadzone2": 0.01})           # or simulate("configs/x.yaml", {...})
+    >>> run.metrics                                       # one-row DataFrame, edge units
+    >>> run.signal("theta_load_deg")                      # numpy array [deg] at run.t [s]
+    >>> fig = run.plot(); folder = run.save("results/mine")
+
+Every function takes what the command takes: a config (YAML path, dict, model or None for the
+defaults) and ``overrides`` (the ``--set`` dotted paths, as a dict or (path, value) pairs).
+Every result has ``.metrics`` (a DataFrame, units in the column names), ``.to_pandas(form)``,
+``.plot()`` (a matplotlib Figure) and ``.save(folder)`` (the command's own writers and output
+folder policy: a given folder must be new or empty). Errors are ``ema_cli.errors.EmaError``
+with a one-line message. Importing this module is cheap: numpy, numba, pandas and matplotlib
+load when first needed.
+"""
+
+from __future__ import annotations
+
+from ema_cli.api.identification import Identification, identify
+from ema_cli.api.simulation import Simulation, simulate
+from ema_cli.api.study import Sweep, sweep
+from ema_cli.api.threshold import Threshold, threshold
+from ema_cli.errors import EmaError
+
+__all__ = ["EmaError", "Identification", "Simulation", "Sweep", "Threshold", "identify",
+           "simulate", "sweep", "threshold"]

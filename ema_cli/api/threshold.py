@@ -1,0 +1,170 @@
+"""``api.threshold``: the threshold magnitude of one nonlinearity, as ``ema threshold`` finds it."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, override_pairs
+from ema_cli.errors import EmaError
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from ema_cli.analysis.threshold import ThresholdResult
+    from ema_cli.config.criteria import Criterion
+    from ema_cli.config.schema import StudyConfig
+
+
+@dataclass
+class Threshold:
+    """A threshold search: ``value`` in the unit of ``ema locations`` (``unit``)."""
+
+    config: StudyConfig
+    vary: str
+    unit: str
+    criteria: list[Criterion]
+    result: ThresholdResult
+    input: str
+    log: bool
+    wall_time_s: float
+    overrides: list[tuple[str, Any]] = field(default_factory=list)
+
+    @property
+    def value(self) -> float:
+        """The threshold (last passing magnitude of the final bracket), or NaN."""
+        return self.result.threshold
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        """threshold.json: status, threshold, bracket, width, simulations, requirements."""
+        out = self.result.summary()
+        out.update(vary=self.vary, unit=self.unit, requirements=[str(c) for c in self.criteria],
+                   input=self.input)
+        cfg = self.config
+        if self.unit == "deg" and cfg.input.kind == "step" and cfg.input.amplitude_deg:
+            out["threshold_percent_of_input"] = 100 * self.value / abs(cfg.input.amplitude_deg)
+        return out
+
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """Every magnitude simulated (``value``), its metrics (edge units), pass/fail, round."""
+        return self.result.history
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """The search history: ``wide`` (as history.csv) or ``long`` (``value``, ``round``,
+        ``metric``, ``metric_value``)."""
+        df = self.result.history
+        if form == "wide":
+            return df
+        if form != "long":
+            raise EmaError(f"form must be 'wide' or 'long', got {form!r}")
+        return df.melt(id_vars=["value", "round", "passes"], var_name="metric",
+                       value_name="metric_value")
+
+    @property
+    def title(self) -> str:
+        """The figure title."""
+        from ema_cli.model.nonlinearities import lookup
+
+        pl = lookup(self.vary)
+        return (f"{self.config.name}: threshold of {self.vary} ({pl.type} @ {pl.location}), "
+                f"{self.input}")
+
+    def plot(self) -> Figure:
+        """Each requirement's metric vs the magnitude, with its limit and the threshold."""
+        from ema_cli.report.threshold_figures import threshold_figure
+
+        return threshold_figure(self.result, self.criteria, f"{self.vary} [{self.unit}]",
+                                self.title, log=self.log)
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write the folder ``ema threshold`` writes -> the folder (new or empty if given)."""
+        import yaml
+
+        from ema_cli.hashing import content_hash
+        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.threshold_report import write_threshold
+
+        cfg_json = self.config.model_dump(mode="json")
+        summary = self.summary
+        out, _ = prepare_output("threshold", f"threshold-{self.config.name}",
+                                content_hash({"cfg": cfg_json, "s": summary}, 16),
+                                Path(folder) if folder is not None else None)
+        write_threshold(out, yaml.safe_dump(cfg_json, sort_keys=False), self.result,
+                        self.criteria, summary, f"{self.vary} [{self.unit}]", self.title,
+                        self.log, {"seed": self.config.seed, "wall_time_s": self.wall_time_s,
+                                   "overrides": [[k, v] for k, v in self.overrides]})
+        finish_output(out)
+        return out
+
+
+def threshold(
+    config: ConfigSource,
+    vary: str,
+    range: tuple[float, float],  # noqa: A002 (the option's name)
+    *,
+    metric: str | None = None,
+    limit: float | None = None,
+    require: Sequence[str] = (),
+    direction: str = "max",
+    log: bool = True,
+    rtol: float | None = None,
+    overrides: Overrides = None,
+) -> Threshold:
+    """Find the threshold magnitude of nonlinearity ``vary`` within ``range`` (LO, HI in the unit
+    of ``ema locations``) at which every requirement holds, as ``ema threshold`` does.
+
+    metric, limit  the main requirement ``metric <= limit`` (edge metric name, e.g.
+                   ``ss_err_pos_deg``); require: further ``"METRIC<=VALUE"`` strings
+    direction      max: largest passing value (small is benign); min: smallest passing value
+    log            search a logarithmic grid (False: linear); rtol: relative bracket width
+    """
+    import math
+
+    from ema_cli.analysis.threshold import find_threshold, simulation_evaluator
+    from ema_cli.config.criteria import DEFAULT_RTOL, Criterion
+    from ema_cli.config.loader import input_signal, load_config
+    from ema_cli.config.schema import StudyConfig
+    from ema_cli.model.nonlinearities import lookup
+
+    criteria = [Criterion.parse(r) for r in require]
+    if metric is not None or limit is not None:
+        if metric is None or limit is None:
+            raise EmaError("--metric and --limit go together")
+        crit = Criterion(metric, "<=", float(limit))
+        crit.check()
+        criteria.insert(0, crit)
+    if not criteria:
+        raise EmaError("give a requirement: --metric with --limit, or --require METRIC<=VALUE")
+    if direction not in ("max", "min"):
+        raise EmaError(f"--direction must be max or min, got {direction!r}")
+    rtol = DEFAULT_RTOL if rtol is None else float(rtol)
+    if not (math.isfinite(rtol) and 0 < rtol < 1):
+        raise EmaError(f"--rtol must be a number in (0, 1), got {rtol}")
+    lo, hi = (float(x) for x in range)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise EmaError(f"--range must be two finite numbers, got {lo} {hi}")
+    if not lo < hi:
+        raise EmaError(f"--range LO HI must have LO < HI, got {lo:g} {hi:g}")
+    if log and lo <= 0:
+        raise EmaError(f"--range LO must be > 0 on a logarithmic grid (or use --linear), "
+                       f"got {lo:g}")
+    if lo < 0:
+        raise EmaError(f"--range LO must be >= 0 (a magnitude), got {lo:g}")
+    pl = lookup(vary)
+    pairs = override_pairs(overrides)
+    cfg = load_config(config, pairs, StudyConfig)
+    signal = input_signal(cfg.input, base_dir(config), cfg.load)
+    nls = {k: v for k, v in cfg.nonlinearities.items() if k != vary}
+    ev = simulation_evaluator(vary, cfg.plant_overrides(), nls, signal, cfg.simulation.duration_s,
+                              cfg.simulation.dt_s, cfg.friction_reading)
+    t0 = time.perf_counter()
+    res = find_threshold(ev, criteria, lo, hi, direction,  # type: ignore[arg-type]
+                         log=log, rtol=rtol)
+    return Threshold(cfg, vary, pl.unit, criteria, res, signal.describe(), log,
+                     time.perf_counter() - t0, pairs)
