@@ -33,8 +33,9 @@ test: $(TSTAMP)  ## lint, then the whole test suite
 	$(BIN)/ruff check ema_cli tests
 	$(BIN)/python -m pytest
 
-bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep
+bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up
 	$(BIN)/python experiments/bench.py
+	$(BIN)/python experiments/bench_startup.py
 
 lint: $(TSTAMP)  ## ruff
 	$(BIN)/ruff check ema_cli tests experiments
@@ -42,7 +43,8 @@ lint: $(TSTAMP)  ## ruff
 reproduce: $(STAMP)  ## reproduce the paper (Figs 2-10, identification, claims)
 	$(EMA) reproduce experiments/paper2020.yaml
 
-reproduce-ci: $(STAMP)  ## the same batch as CI runs it
+reproduce-ci: $(STAMP)  ## the same batch as CI runs it (replaces results/reproduce-ci)
+	rm -rf results/reproduce-ci
 	$(EMA) reproduce experiments/paper2020.yaml --out results/reproduce-ci
 
 clean:  ## remove the virtual environment and caches (results/ is kept)

@@ -67,7 +67,7 @@ class Sweep:
         column per signal, units in the names)."""
         import pandas as pd
 
-        from ema_cli.sweep.run import FINISHED
+        from ema_cli.sweep.run import DIVERGED, OK
 
         if form not in ("wide", "long"):
             raise EmaError(f"form must be 'wide' or 'long', got {form!r}")
@@ -75,7 +75,7 @@ class Sweep:
         swept = [c for info in self.result.plan.axes for c in info.columns if c in df.columns]
         frames = []
         for i, job in enumerate(self.jobs):
-            if df["status"].iloc[i] not in FINISHED:
+            if df["status"].iloc[i] not in (OK, DIVERGED):
                 continue
             ts = self.result.timeseries(job)
             ts.insert(0, "job", job)

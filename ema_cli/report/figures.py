@@ -52,7 +52,9 @@ def tracking_figure(ts: Mapping[str, Any], title: str) -> Figure:
     for a in axes.flat:
         a.grid(True, alpha=0.3)
     fig.suptitle(title)
-    fig.tight_layout()
+    # fixed margins instead of tight_layout: tight_layout draws the figure once more (a fifth
+    # of a short `ema simulate`), and this layout never changes
+    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.075, top=0.9, wspace=0.2, hspace=0.22)
     return fig
 
 
