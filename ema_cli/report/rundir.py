@@ -71,6 +71,8 @@ def git_commit() -> str | None:
     return out.stdout.strip() or None if out.returncode == 0 else None
 
 
+CACHE_NAME = ".cache"
+"""A sweep's job cache inside its output folder (when that is outside results/)."""
 MARKER = ".ema-run.json"
 """Written first into every output folder: which command made it, for which inputs, finished."""
 
@@ -93,8 +95,8 @@ def check_output(out: Path | None, command: str, fingerprint: str | None = None,
     if out.exists() and not out.is_dir():
         raise EmaError(f"--out '{out}' is a file; expected a folder (new or empty)")
     if out.is_dir():
-        try:
-            busy = any(out.iterdir())
+        try:  # a job cache (.cache) alone does not make a folder a result
+            busy = any(p.name != CACHE_NAME for p in out.iterdir())
         except OSError as exc:
             raise EmaError(f"--out '{out}' cannot be read: {exc.strerror}") from None
         if busy:

@@ -1,0 +1,167 @@
+"""Bad input on the command line, class by class, for every command: one line naming the option,
+a non-zero exit, no traceback, nothing written outside the output folder, nothing overwritten.
+
+(Config-file classes — YAML bombs, names in paths, numeric settings, --nl conflicts — are in
+tests/unit/test_bad_config.py.)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from ema_cli.cli.main import COMMANDS, app
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = str(ROOT / "configs" / "deadzone2.yaml")
+runner = CliRunner()
+
+# the quickest form of each command that writes a folder
+WRITERS = {
+    "simulate": ["simulate", "--duration", "0.01"],
+    "sweep": ["sweep", CONFIG, "--set", "simulation.duration_s=0.01", "--no-progress", "-j", "1"],
+    "threshold": ["threshold", CONFIG, "--vary", "deadzone2", "--range", "0.001", "0.1",
+                  "--metric", "ss_err_pos_deg", "--limit", "0.5",
+                  "--set", "simulation.duration_s=0.01"],
+    "identify": ["identify", "--method", "exact"],
+    "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
+}
+
+
+def invoke(*args: str):
+    return runner.invoke(app, list(args), catch_exceptions=False)
+
+
+def one_clear_line(r, *needles: str) -> None:
+    """Exit code 2 (bad input), one line starting with 'error:', naming every needle."""
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:"), r.output
+    assert "Traceback" not in r.output
+    for n in needles:
+        assert n in lines[0], r.output
+
+
+def test_every_writer_is_covered():
+    assert set(WRITERS) == {n for n, _ in COMMANDS} - {"validate", "show", "locations",
+                                                       "params"}
+
+
+@pytest.mark.parametrize("cmd", sorted(WRITERS))
+def test_out_is_a_file(tmp_path, cmd):
+    f = tmp_path / "a_file"
+    f.write_text("keep")
+    one_clear_line(invoke(*WRITERS[cmd], "--out", str(f)), "--out", "is a file")
+    assert f.read_text() == "keep"
+
+
+@pytest.mark.parametrize("cmd", sorted(WRITERS))
+def test_out_below_a_file(tmp_path, cmd):
+    f = tmp_path / "a_file"
+    f.write_text("keep")
+    one_clear_line(invoke(*WRITERS[cmd], "--out", str(f / "sub")), "--out", "not a folder")
+
+
+@pytest.mark.parametrize("cmd", sorted(WRITERS))
+def test_out_holding_other_files_is_never_overwritten(tmp_path, cmd):
+    (tmp_path / "mine.csv").write_text("precious")
+    one_clear_line(invoke(*WRITERS[cmd], "--out", str(tmp_path)), "--out", "never overwritten")
+    assert [p.name for p in tmp_path.iterdir()] == ["mine.csv"]
+    assert (tmp_path / "mine.csv").read_text() == "precious"
+
+
+@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify"])
+def test_a_finished_run_is_not_overwritten(tmp_path, cmd):
+    out = tmp_path / "run"
+    r = invoke(*WRITERS[cmd], "--out", str(out))
+    assert r.exit_code == 0, r.output
+    before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
+    one_clear_line(invoke(*WRITERS[cmd], "--out", str(out)), "--out", "finished",
+                   "never overwritten")
+    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
+
+
+def test_nothing_is_written_outside_the_output_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out"
+    r = invoke(*WRITERS["sweep"], "--out", str(out))
+    assert r.exit_code == 0, r.output
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+    r = invoke(*WRITERS["simulate"], "--out", str(tmp_path / "out2"))
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out2"]
+
+
+@pytest.mark.parametrize(("args", "needles"), [
+    (["simulate", "--dt", "nan"], ["--dt", "finite"]),
+    (["simulate", "--dt", "-1e-5"], ["--dt", "> 0"]),
+    (["simulate", "--duration", "inf"], ["--duration", "finite"]),
+    (["simulate", "--duration", "0"], ["--duration", "> 0"]),
+    (["simulate", "--step", "nan"], ["--step", "finite"]),
+    (["simulate", "--step", "-inf"], ["--step", "finite"]),
+    (["sweep", CONFIG, "-j", "0"], ["--n-jobs", ">= 1"]),
+    (["sweep", CONFIG, "-j", "100000"], ["--n-jobs", "<= 4096"]),
+    (["sweep", CONFIG, "--backend", "gpu"], ["--backend", "gpu"]),
+    (["reproduce", str(ROOT / "experiments" / "paper2020.yaml"), "--n-jobs", "-5"],
+     ["--n-jobs", ">= 1"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "nan", "1", "--metric",
+      "ss_err_pos_deg", "--limit", "0.1"], ["--range", "finite"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "1", "0.1", "--metric",
+      "ss_err_pos_deg", "--limit", "0.1"], ["--range", "LO < HI"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "0", "1", "--metric",
+      "ss_err_pos_deg", "--limit", "0.1"], ["--range", "> 0"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "0.01", "1", "--metric",
+      "ss_err_pos_deg", "--limit", "inf"], ["limit", "finite"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "0.01", "1", "--metric",
+      "ss_err_pos_deg", "--limit", "0.1", "--rtol", "0"], ["--rtol"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "0.01", "1", "--metric",
+      "ss_err_pos_deg", "--limit", "0.1", "--rtol", "nan"], ["--rtol"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "0.01", "1"], ["requirement"]),
+    (["identify", "--pc", "1.5"], ["--pc", "<= 1"]),
+    (["identify", "--pm", "nan"], ["--pm", "finite"]),
+    (["identify", "--noise", "-1"], ["--noise", ">= 0"]),
+    (["identify", "--k-range", "inf", "700"], ["--k-range", "finite"]),
+    (["identify", "--c", "-2"], ["--c", ">= 0"]),
+])
+def test_numeric_options_are_checked_and_named(tmp_path, args, needles):
+    one_clear_line(invoke(*args, "--out", str(tmp_path / "x")), *needles)
+    assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("cmd", ["simulate", "sweep", "threshold", "identify", "reproduce",
+                                 "validate", "show"])
+def test_every_command_takes_set(cmd):
+    r = invoke(cmd, "--help")
+    assert r.exit_code == 0 and "--set" in r.output
+
+
+def test_help_keeps_units_literal():
+    r = invoke("simulate", "--help")
+    assert "[deg]" in r.output and "[s]" in r.output
+
+
+def test_set_is_the_same_mechanism_everywhere(tmp_path):
+    # a list item by index works on simulate as on sweep (the same override code)
+    r = invoke("simulate", CONFIG, "--duration", "0.01", "--set", "sweep.axes.0.values=[1]",
+               "--out", str(tmp_path / "a"))
+    assert r.exit_code == 0, r.output
+    one_clear_line(invoke("simulate", CONFIG, "--set", "sweep.axes.5.values=[1]"), "--set",
+                   "sweep.axes", "index")
+    one_clear_line(invoke("identify", "--set", "ga.pop=-3"), "ga.pop")
+    one_clear_line(invoke("identify", "--set", "nope=1"), "--set nope", "unknown key")
+
+
+def test_an_unexpected_error_is_one_line_not_a_traceback(monkeypatch, tmp_path):
+    import ema_cli.api.simulation as sim_api
+
+    def boom(*a, **k):
+        raise RuntimeError("kaboom\nsecond line")
+
+    monkeypatch.setattr(sim_api, "simulate", boom)
+    r = invoke("simulate", "--out", str(tmp_path / "x"))
+    assert r.exit_code == 1
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "unexpected RuntimeError: kaboom second line" in lines[0]
+    assert "Traceback" not in r.output
