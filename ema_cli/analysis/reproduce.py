@@ -24,6 +24,7 @@ from ema_cli.config.experiment import ExperimentConfig, ThresholdSpec
 from ema_cli.config.loader import input_signal, load_config, read_yaml, validate
 from ema_cli.config.schema import StudyConfig
 from ema_cli.errors import EmaError
+from ema_cli.identify.settings import IdentifySettings
 from ema_cli.model.nonlinearities import lookup
 
 
@@ -60,8 +61,12 @@ class Reproduction:
 
 
 def load_experiment(path: Path) -> ExperimentConfig:
-    """Read and validate an experiment file (errors name the file and key)."""
+    """Read and validate an experiment file (errors name the file and key), with the study and
+    threshold configs it names and its identification settings."""
     exp = validate(ExperimentConfig, read_yaml(path), str(path))
+    if exp.identification is not None:
+        validate(IdentifySettings, exp.identification.settings,
+                 f"{path}: identification.settings")
     for s in exp.studies:
         if not (path.parent / s.config).is_file():
             raise EmaError(f"{path}: study '{s.id}': config '{s.config}' does not exist")

@@ -5,6 +5,7 @@ Every failure becomes an :class:`EmaError` naming the file, the key path and wha
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,22 +24,137 @@ from ema_cli.units import DEG
 M = TypeVar("M", bound=BaseModel)
 
 
+MAX_YAML_BYTES = 1 << 20
+"""The largest config or experiment file read: 1 MiB (checked before parsing) [bytes]."""
+MAX_YAML_NODES = 1_000_000
+"""The most YAML nodes a file may expand to, aliases counted at their expanded size: a
+1 MiB file holds far fewer without aliases; an alias bomb (billion laughs) is refused."""
+MAX_YAML_DEPTH = 50
+"""The deepest nesting of mappings and sequences accepted (the schemas need fewer than 10)."""
+
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+_BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class _DuplicateKey(Exception):
+    def __init__(self, key: Any, line: int) -> None:
+        super().__init__(key, line)
+        self.key, self.line = key, line
+
+
+class _Loader(_BaseLoader):  # type: ignore[misc, valid-type]
+    """The safe loader, refusing a key given twice in one mapping (PyYAML keeps the last)."""
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
+            for key_node, _ in node.value:
+                if key_node.tag == _MERGE_TAG:
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                    seen.add(key)
+                except TypeError:  # unhashable: SafeConstructor reports it
+                    continue
+                if duplicate:
+                    raise _DuplicateKey(_one_line(key), key_node.start_mark.line + 1)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _check_structure(text: str, p: Path) -> None:
+    """Walk the YAML events (iteratively: no recursion, no construction) and refuse deep
+    nesting, recursive aliases and alias expansion past :data:`MAX_YAML_NODES`."""
+    sizes: dict[str, int] = {}  # anchor -> expanded node count of its (closed) node
+    stack: list[list[Any]] = [[None, 0]]  # open collections: [anchor, expanded count]
+    for event in yaml.parse(text, Loader=_BaseLoader):
+        if isinstance(event, yaml.CollectionStartEvent):
+            if len(stack) > MAX_YAML_DEPTH:
+                line = event.start_mark.line + 1 if event.start_mark else 0
+                raise EmaError(f"{p}: nesting deeper than {MAX_YAML_DEPTH} levels at line "
+                               f"{line}; a config needs only a few")
+            stack.append([event.anchor, 1])
+            continue
+        if isinstance(event, yaml.CollectionEndEvent):
+            anchor, size = stack.pop()
+            if anchor is not None:
+                sizes[anchor] = size
+        elif isinstance(event, yaml.ScalarEvent):
+            size = 1
+            if event.anchor is not None:
+                sizes[event.anchor] = 1
+        elif isinstance(event, yaml.AliasEvent):
+            line = event.start_mark.line + 1 if event.start_mark else 0
+            if event.anchor not in sizes:
+                if any(frame[0] == event.anchor for frame in stack):
+                    raise EmaError(f"{p}: alias *{event.anchor} at line {line} refers to a "
+                                   "node that contains it (a recursive structure)")
+                raise EmaError(f"{p}: alias *{event.anchor} at line {line} has no anchor "
+                               f"&{event.anchor} before it")
+            size = sizes[event.anchor]
+        else:
+            continue
+        stack[-1][1] += size
+        if stack[-1][1] > MAX_YAML_NODES or sum(f[1] for f in stack) > MAX_YAML_NODES:
+            raise EmaError(f"{p}: expands to more than {MAX_YAML_NODES:,} values (aliases "
+                           "counted at their expanded size); refused as an alias bomb")
+
+
+def _one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
 def read_yaml(path: str | Path) -> dict[str, Any]:
-    """Parse a YAML mapping from ``path`` (errors name the file and the line)."""
+    """Parse a YAML mapping from ``path`` (errors name the file and the line).
+
+    Refused with an EmaError: files over :data:`MAX_YAML_BYTES` (before parsing), binary or
+    non-UTF-8 files, nesting deeper than :data:`MAX_YAML_DEPTH`, alias expansion past
+    :data:`MAX_YAML_NODES` or recursive aliases, a key given twice in one mapping, and a top
+    level that is not a mapping.
+    """
     p = Path(path)
     if not p.exists():
         raise EmaError(f"config file '{p}' does not exist")
     if not p.is_file():
         raise EmaError(f"config '{p}' is not a file")
     try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+        size = p.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise EmaError(f"config file '{p}' is {size:,} bytes; at most {MAX_YAML_BYTES:,} "
+                           "bytes (1 MiB) are read")
+        with p.open("rb") as fh:
+            raw = fh.read(MAX_YAML_BYTES + 1)
+    except OSError as exc:
+        raise EmaError(f"config file '{p}' cannot be read: {exc.strerror or exc}") from None
+    if len(raw) > MAX_YAML_BYTES:
+        raise EmaError(f"config file '{p}' is larger than {MAX_YAML_BYTES:,} bytes (1 MiB)")
+    if b"\x00" in raw:
+        raise EmaError(f"config file '{p}' is binary (it contains NUL bytes); expected YAML text")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise EmaError(f"config file '{p}' is not UTF-8 text (invalid byte at offset "
+                       f"{exc.start}); expected YAML text") from None
+    try:
+        _check_structure(text, p)
+        loader = _Loader(text)
+        try:
+            data = loader.get_single_data()
+        finally:
+            loader.dispose()
+    except _DuplicateKey as exc:
+        raise EmaError(f"{p}: duplicate key '{exc.key}' at line {exc.line}; each key may be "
+                       "given once in a mapping") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
-        raise EmaError(f"{p}: YAML syntax error{where}: {problem}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise EmaError(f"config file '{p}' cannot be read: {exc}") from None
+        context = getattr(exc, "context", None)
+        if context and context.startswith("expected"):  # e.g. "expected a single document"
+            problem = f"{problem} ({context})"
+        raise EmaError(f"{p}: YAML syntax error{where}: {_one_line(problem)}") from None
+    except RecursionError:  # not expected after the depth check; never a traceback
+        raise EmaError(f"{p}: nesting too deep; at most {MAX_YAML_DEPTH} levels") from None
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -90,22 +206,50 @@ def apply_overrides(
     return out
 
 
+_UNION_TAG = re.compile(r"^(float|int|str|bool|none|list|dict|tuple|set)$|[\[\]()]")
+"""A ``loc`` element pydantic adds for a member of a union (``float``, ``list[...]``,
+``function-after[...]``, ``tagged-union[...]``), not a key of the file."""
+
+
+def _key_path(loc: Sequence[Any]) -> str:
+    parts = [str(x) for x in loc
+             if not (isinstance(x, str) and _UNION_TAG.search(x))]
+    return ".".join(parts) or "(top level)"
+
+
 def validate(model: type[M], data: Mapping[str, Any], source: str) -> M:
-    """Validate ``data`` against ``model``; errors name ``source`` and the key path."""
+    """Validate ``data`` against ``model``; errors name ``source`` and the key path.
+
+    The message is one line: ``SOURCE: KEY.PATH: what was expected`` for each key in error
+    (``; `` between them), the failures of a union's members at one key joined by ``or``.
+    """
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        lines = []
+        by_key: dict[str, list[str]] = {}
         for err in exc.errors():
-            loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
+            loc = _key_path(err["loc"])
             msg = err["msg"].removeprefix("Value error, ")
             if msg.startswith(KEY_MARK):  # a dict key named by a validator
                 key, msg = msg[1:].split(KEY_MARK, 1)
-                loc = f"{loc}.{key}"
+                loc = f"{loc}.{key}" if loc != "(top level)" else key
             if err["type"] == "extra_forbidden":
                 msg = "unknown key"
-            lines.append(f"{source}: {loc}: {msg}")
-        raise EmaError("\n".join(lines)) from None
+            msgs = by_key.setdefault(loc, [])
+            msg = _one_line(msg)
+            if msg not in msgs:
+                msgs.append(msg)
+        parts = [f"{loc}: {_either(msgs)}" for loc, msgs in by_key.items()]
+        raise EmaError(f"{source}: " + "; ".join(parts)) from None
+
+
+def _either(msgs: list[str]) -> str:
+    """The failures of a union's members as one sentence (``a valid number or a valid string``)."""
+    head = "Input should be "
+    if len(msgs) > 1 and all(m.startswith(head) for m in msgs):
+        rest = [m.removeprefix(head) for m in msgs]
+        return head + ", ".join(rest[:-1]) + " or " + rest[-1]
+    return " or ".join(msgs)
 
 
 def load_config(

@@ -9,28 +9,28 @@ the sweep, outputs and parallel settings.
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
+from ema_cli.config.base import (
+    FiniteFloat,
+    NonNegFloat,
+    PlainName,
+    PositiveFloat,
+    PositiveInt,
+    Seed,
+    Strict,
+)
 from ema_cli.errors import EmaError
-from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
+from ema_cli.model.nonlinearities import check_distinct, lookup, nonlinearity_updates
 from ema_cli.model.params import INDEX, check_value, resolve
 from ema_cli.sim.runner import DEFAULT_DT, DEFAULT_OUTPUT_INTERVAL, off_grid, plan_steps
 from ema_cli.sim.tables import METRIC_BY_EDGE
 from ema_cli.units import RPM
 
 Scalar = float | int | str
-
-NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-
-
-class Strict(BaseModel):
-    """Base: frozen, closed (unknown keys are errors)."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
 
 
 def _reraise(exc: EmaError, key: str | None = None) -> ValueError:
@@ -48,14 +48,17 @@ class InputConfig(Strict):
 
     kind: Literal["step", "ramp", "sine", "chirp", "csv"] = Field(
         "step", description="signal shape")
-    amplitude_deg: float = Field(
+    amplitude_deg: FiniteFloat = Field(
         20.0, description="step size, sine/chirp amplitude, or ramp end value (0: none) [deg]")
-    start_s: float = Field(0.0, ge=0, description="time the signal starts [s]")
-    rate_deg_s: float = Field(0.0, description="ramp slope [deg/s]")
-    freq_hz: float = Field(1.0, gt=0, description="sine frequency / chirp start frequency [Hz]")
-    freq_end_hz: float = Field(1.0, gt=0, description="chirp end frequency [Hz]")
-    sweep_time_s: float = Field(0.0, ge=0, description="chirp sweep time [s] (0: whole run)")
-    offset_deg: float = Field(0.0, description="constant added to sine/chirp [deg]")
+    start_s: NonNegFloat = Field(
+        0.0, description="time the signal starts [s], before simulation.duration_s")
+    rate_deg_s: FiniteFloat = Field(0.0, description="ramp slope [deg/s]")
+    freq_hz: PositiveFloat = Field(
+        1.0, description="sine frequency / chirp start frequency [Hz]")
+    freq_end_hz: PositiveFloat = Field(1.0, description="chirp end frequency [Hz]")
+    sweep_time_s: NonNegFloat = Field(
+        0.0, description="chirp sweep time [s] (0: whole run)")
+    offset_deg: FiniteFloat = Field(0.0, description="constant added to sine/chirp [deg]")
     path: str | None = Field(None, description="CSV profile with columns t_s, theta_ref_deg")
 
     @model_validator(mode="after")
@@ -70,10 +73,10 @@ class InputConfig(Strict):
 class SimulationConfig(Strict):
     """The fixed-step time grid."""
 
-    duration_s: float = Field(1.0, gt=0, description="simulated time [s]")
-    dt_s: float = Field(DEFAULT_DT, gt=0, description="integration step [s]")
-    output_interval_s: float = Field(
-        DEFAULT_OUTPUT_INTERVAL, gt=0, description="interval of the recorded time series [s]")
+    duration_s: PositiveFloat = Field(1.0, description="simulated time [s]")
+    dt_s: PositiveFloat = Field(DEFAULT_DT, description="integration step [s]")
+    output_interval_s: PositiveFloat = Field(
+        DEFAULT_OUTPUT_INTERVAL, description="interval of the recorded time series [s]")
 
     @model_validator(mode="after")
     def _grid(self) -> SimulationConfig:
@@ -107,6 +110,10 @@ def _check_nonlinearities(values: dict[str, Any]) -> dict[str, Any]:
                                name) from None
         if not isinstance(value, str) and (not math.isfinite(float(value)) or value < 0):
             raise _reraise(EmaError(f"must be a finite number >= 0, got {value!r}"), name)
+    try:
+        check_distinct(values)  # one setting per placement (deadzone2 = deadzone@transmission)
+    except EmaError as exc:
+        raise _reraise(exc) from None
     return values
 
 
@@ -117,19 +124,13 @@ class LoadConfig(Strict):
     positive along +theta_L.
     """
 
-    torque_nm: float = Field(0.0, description="constant external torque on the load [N*m]")
-    spring_nm_per_rad: float = Field(
+    torque_nm: FiniteFloat = Field(
+        0.0, description="constant external torque on the load [N*m]")
+    spring_nm_per_rad: FiniteFloat = Field(
         0.0, description="hinge-moment gradient k_h: external torque -k_h*theta_L [N*m/rad]")
     profile: str | None = Field(
         None, description="CSV with columns t_s, torque_nm added to the torque (interpolated "
                           "linearly, end values held)")
-
-    @field_validator("torque_nm", "spring_nm_per_rad")
-    @classmethod
-    def _finite(cls, v: float) -> float:
-        if not math.isfinite(v):
-            raise ValueError(f"must be a finite number, got {v}")
-        return v
 
 
 class MotorConfig(Strict):
@@ -143,18 +144,18 @@ class MotorConfig(Strict):
 class ControllerConfig(Strict):
     """Controller options: continuous (default) or digital with a sample time."""
 
-    sample_time_s: float | None = Field(
-        None, gt=0, description="digital controller sample time [s], a whole multiple of "
+    sample_time_s: PositiveFloat | None = Field(
+        None, description="digital controller sample time [s], a whole multiple of "
                                 "simulation.dt_s (absent: continuous)")
 
 
 class SensorsConfig(Strict):
     """Sensor quantisation (absent: ideal sensors)."""
 
-    position_counts_per_rev: float | None = Field(
-        None, gt=0, description="load-angle encoder resolution [counts/rev]")
-    speed_resolution_rpm: float | None = Field(
-        None, gt=0, description="motor-speed measurement resolution [rpm]")
+    position_counts_per_rev: PositiveFloat | None = Field(
+        None, description="load-angle encoder resolution [counts/rev]")
+    speed_resolution_rpm: PositiveFloat | None = Field(
+        None, description="motor-speed measurement resolution [rpm]")
 
 
 SECTION_PARAMS = {
@@ -168,7 +169,8 @@ SECTION_PARAMS = {
 class RunConfig(Strict):
     """Everything one simulation needs (the part of a study config ``ema simulate`` reads)."""
 
-    name: str = Field("default", description="study name: letters, digits, _ . - (a folder name)")
+    name: PlainName = Field(
+        "default", description="study name: letters, digits, _ . - (a folder name), <= 64 chars")
     description: str = Field("", description="what the study is for")
     plant: dict[str, Scalar] = Field(
         default_factory=dict, description="model parameter overrides, SI (see `ema params`)")
@@ -184,7 +186,7 @@ class RunConfig(Strict):
     motor: MotorConfig = Field(default_factory=MotorConfig)
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
     sensors: SensorsConfig = Field(default_factory=SensorsConfig)
-    seed: int = Field(0, ge=0, description="seed of everything random")
+    seed: Seed = Field(0, description="seed of everything random (0 .. 2**63-1)")
 
     def section_params(self) -> dict[str, float]:
         """The model parameters (SI) set by the load, motor, controller and sensors sections."""
@@ -241,14 +243,13 @@ class RunConfig(Strict):
                              f"({self.simulation.dt_s:g} s)")
         return self
 
-    @field_validator("name")
-    @classmethod
-    def _name(cls, v: str) -> str:
-        if not NAME_RE.match(v) or ".." in v:
-            raise ValueError(
-                "name must be letters, digits, '_', '.', '-' (no path separators, no '..'), "
-                f"got {v!r}")
-        return v
+    @model_validator(mode="after")
+    def _start(self) -> RunConfig:
+        if self.input.start_s >= self.simulation.duration_s:
+            raise ValueError(f"input.start_s ({self.input.start_s:g} s) must be before the end "
+                             f"of the run, simulation.duration_s ({self.simulation.duration_s:g}"
+                             " s)")
+        return self
 
     @field_validator("plant")
     @classmethod
@@ -266,6 +267,9 @@ class RunConfig(Strict):
 # Sweep studies (`ema sweep`): the sweep, outputs and parallel sections of a StudyConfig.
 
 MAX_JOBS_DEFAULT = 100_000  # a sweep expanding past this many jobs is refused [jobs]
+MAX_JOBS_CAP = 1_000_000  # the largest sweep.max_jobs accepted [jobs]
+MAX_WORKERS = 4096  # the most parallel workers (parallel.n_jobs) [workers]
+MAX_CHUNK = 1_000_000  # the largest parallel.chunk_size [jobs]
 MAX_AXIS_POINTS = 1_000_000  # the most points one linspace/logspace may ask for [points]
 MAX_CURVES_DEFAULT = 8  # the most curves drawn in one overlay figure [curves]
 RELATIVE_TYPES = ("deadzone",)
@@ -294,9 +298,10 @@ def _bools_to_words(value: Any) -> Any:
 class Span(Strict):
     """``num`` magnitudes from ``start`` to ``stop`` (both included), in the axis unit."""
 
-    start: float = Field(description="first value, in the axis unit")
-    stop: float = Field(description="last value, in the axis unit")
-    num: int = Field(ge=1, le=MAX_AXIS_POINTS, description="number of values")
+    start: FiniteFloat = Field(description="first value, in the axis unit")
+    stop: FiniteFloat = Field(description="last value, in the axis unit")
+    num: PositiveInt = Field(le=MAX_AXIS_POINTS,
+                             description=f"number of values (at most {MAX_AXIS_POINTS:,})")
 
 
 class SweepAxis(Strict):
@@ -315,7 +320,7 @@ class SweepAxis(Strict):
     see ``ema_cli.sweep.plan._relative_scales``.
     """
 
-    name: str | None = Field(
+    name: PlainName | None = Field(
         None, description="axis name for columns, legends and files (default: the swept name, "
                           "or 'location'/'type'/'placement' for a list)")
     nonlinearity: str | list[str] | None = Field(
@@ -398,9 +403,6 @@ class SweepAxis(Strict):
         if len(given) != 1:
             raise ValueError("give the axis values with exactly one of 'values', 'linspace' "
                              f"or 'logspace' (got {given or 'none'})")
-        if self.name is not None and not NAME_RE.match(self.name):
-            raise _reraise(EmaError(f"must be letters, digits, '_', '.', '-', got {self.name!r}"),
-                           "name")
         if self.logspace is not None and (self.logspace.start <= 0 or self.logspace.stop <= 0):
             raise _reraise(EmaError("start and stop must be > 0 for a logarithmic axis, got "
                                     f"{self.logspace.start}, {self.logspace.stop}"), "logspace")
@@ -478,7 +480,9 @@ class SweepConfig(Strict):
     baseline: bool = Field(
         True, description="add a run with the swept nonlinearities off (dead zones 0, "
                           "saturations and friction off, compliance at the model default)")
-    max_jobs: int = Field(MAX_JOBS_DEFAULT, ge=1, description="refuse sweeps with more jobs")
+    max_jobs: PositiveInt = Field(
+        MAX_JOBS_DEFAULT, le=MAX_JOBS_CAP,
+        description=f"refuse sweeps with more jobs (at most {MAX_JOBS_CAP:,})")
 
     @model_validator(mode="after")
     def _check(self) -> SweepConfig:
@@ -545,13 +549,16 @@ class ParallelConfig(Strict):
     """How the jobs are spread over cores or a cluster."""
 
     n_jobs: int | None = Field(
-        None, ge=-1, description="workers (processes or threads); None or -1: all cores")
+        None, ge=-1, le=MAX_WORKERS,
+        description=f"workers (processes or threads, at most {MAX_WORKERS}); None or -1: all "
+                    "cores")
     backend: Literal["auto", "loky", "threads", "dask"] = Field(
         "auto", description="auto (the faster local backend), loky (processes), threads "
                             "(numba prange in this process) or dask (needs scheduler)")
     scheduler: str | None = Field(None, description="dask scheduler address, e.g. tcp://host:8786")
-    chunk_size: int | None = Field(
-        None, ge=1, description="jobs per kernel batch (default: automatic)")
+    chunk_size: PositiveInt | None = Field(
+        None, le=MAX_CHUNK,
+        description=f"jobs per kernel batch (default: automatic; at most {MAX_CHUNK:,})")
 
     @field_validator("n_jobs")
     @classmethod

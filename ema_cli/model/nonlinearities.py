@@ -5,12 +5,24 @@ position sensor or the transmission (where it is the backlash dead band); a satu
 regulator output or on the current. Each placement knows its magnitude's unit at the edge (the
 paper's units) and how to turn a magnitude into SI parameter updates. This module is the one
 place where paper units are converted for the nonlinearities.
+
+Settings compose in any order: each placement writes its own SI parameters and no other's.
+``gap1`` (compliance@transmission) sets the stiffness ``kL`` only; the dead band ``alpha`` is
+``deadzone2``'s (default 0: the paper's gap without dead zone), so ``gap1=2`` with
+``deadzone2=0.01`` is a compliant shaft with a 0.01 deg dead band whichever comes first. One
+placement named twice (``deadzone2`` and ``deadzone@transmission``) is an error naming both
+(:func:`check_distinct`, :func:`combined_updates`).
+
+Magnitude 0 means the nonlinearity is absent, as ``off`` does: a dead zone of 0, and
+``friction1=0`` is no friction in both readings (not LuGre with ``sigma2 = 0``; for that set
+``plant.friction=1``, whose ``sigma2`` defaults to 0). A saturation limit or a stiffness of 0
+is refused (``off`` removes a saturation; a compliance cannot be removed).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
 from ema_cli.errors import EmaError
@@ -39,11 +51,15 @@ class Placement:
 
 
 def _number(name: str, value: float | str, unit: str, allow_off: bool) -> float | None:
+    if isinstance(value, bool):  # YAML's yes/no/true/false: not a magnitude
+        raise EmaError(f"'{name}' expects a number in {unit}{' or off' if allow_off else ''}, "
+                       f"got the boolean {str(value).lower()}")
     if isinstance(value, str):
         if value.strip().lower() == OFF:
             if allow_off:
                 return None
-            raise EmaError(f"'{name}' cannot be 'off'; set 0 to remove it (expected {unit})")
+            raise EmaError(f"'{name}' cannot be 'off' (it has no off state); expected a number > 0 "
+                           f"in {unit}")
         try:
             value = float(value)
         except ValueError:
@@ -79,17 +95,15 @@ def _compliance(value: float | str, p: Mapping[str, float], name: str) -> Update
     x = _number(name, value, "N*m/rad", allow_off=False)
     if not x:
         raise EmaError(f"'{name}' stiffness must be > 0 N*m/rad (motor shaft), got {value!r}")
-    return {"kL": x * p["m"] ** 2, "alpha": 0.0}
+    return {"kL": x * p["m"] ** 2}  # the dead band is deadzone2's: settings compose
 
 
 def _friction(value: float | str, p: Mapping[str, float], name: str, reading: str) -> Updates:
     x = _number(name, value, "N*m*s/rad" if reading == "sigma2" else "N*m", allow_off=True)
-    if x is None:
+    if x is None or x == 0:  # off, or magnitude 0: no friction (either reading)
         return {"friction": 0.0}
     if reading == "sigma2":
         return {"friction": 1.0, "sigma2": x}
-    if x == 0:
-        return {"friction": 0.0}
     sigma0 = SIGMA0_PER_FC * x
     return {
         "friction": 1.0,
@@ -122,10 +136,11 @@ PLACEMENTS: tuple[Placement, ...] = (
     Placement("saturation", "current", "A", "armature current limit, or off",
               _saturation("sat3", 1.0, "A"), "30.35", "+-30.35 A vs removed", "saturation3"),
     Placement("compliance", "transmission", "N*m/rad",
-              "stiffness referred to the motor shaft, no dead band (kL = value*m^2, alpha = 0)",
+              "stiffness referred to the motor shaft (kL = value*m^2; dead band: deadzone2's)",
               _compliance, "1.024", "0.01, 0.1, 1, 10 N*m/rad", "gap1"),
     Placement("friction", "motor_shaft", "N*m*s/rad",
-              "LuGre viscous coefficient sigma2 (Fc, Fs fixed), or off; reading 'scale': Fc [N*m]",
+              "LuGre viscous coefficient sigma2 (Fc, Fs fixed); 0 or off: no friction; reading "
+              "'scale': Fc [N*m]",
               lambda v, p, n: _friction(v, p, n, "sigma2"), "off",
               "0.0001, 0.001, 0.01, 0.1", "friction1"),
 )
@@ -172,3 +187,38 @@ def nonlinearity_updates(
             )
         return _friction(value, params, name, friction_reading)
     return pl.apply(value, params, name)
+
+
+def check_distinct(names: Iterable[str]) -> None:
+    """Refuse one placement named twice (a paper name and its ``type@location``), naming both;
+    every name must be known (:func:`lookup`)."""
+    seen: dict[str, str] = {}
+    for name in names:
+        pl = lookup(name)
+        key = f"{pl.type}@{pl.location}"
+        if key in seen:
+            raise EmaError(f"'{seen[key]}' and '{name}' set the same nonlinearity ({key}); "
+                           "give it once")
+        seen[key] = name
+
+
+def combined_updates(
+    settings: Mapping[str, float | str], params: Mapping[str, float],
+    friction_reading: str = "sigma2",
+) -> Updates:
+    """The SI parameter updates of several settings together, the same in any order.
+
+    A placement named twice, or two settings writing the same SI parameter, is an EmaError
+    naming both.
+    """
+    check_distinct(settings)
+    out: Updates = {}
+    writer: dict[str, str] = {}
+    for name, value in settings.items():
+        for param, x in nonlinearity_updates(name, value, params, friction_reading).items():
+            if param in writer:
+                raise EmaError(f"'{writer[param]}' and '{name}' both set the model parameter "
+                               f"'{param}'; give one")
+            writer[param] = name
+            out[param] = x
+    return out

@@ -24,6 +24,7 @@ from ema_cli.analysis.reproduce import (
     load_experiment,
     study_config,
 )
+from ema_cli.config.base import check_plain_name
 from ema_cli.config.experiment import StudySpec
 from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
@@ -38,6 +39,14 @@ FIGURE_METRICS = ("t50_s", "overshoot_pct", "settling_time_s", "p2p_err_pos_deg"
 """Metrics listed under each figure of REPORT.md."""
 
 
+def _under(out: Path, *names: str) -> Path:
+    """``out/name/...`` where every name is a plain file or folder name (ids and figure names
+    come from the experiment file; the schema has checked them, this keeps every join safe)."""
+    for name in names:
+        check_plain_name(name, "an output file or folder name")
+    return out.joinpath(*names)
+
+
 def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
                    progress: bool = True, log: Any = print) -> Reproduction:
     """Run the whole batch into ``out``; returns the computed Reproduction.
@@ -50,7 +59,7 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
     for s in rep.exp.studies:
         cfg, cpath = study_config(path, s.config)
         log(f"study {s.id}: {cpath}")
-        res = run_sweep(cfg, out / "studies" / s.id, n_jobs=n_jobs, progress=progress,
+        res = run_sweep(cfg, _under(out, "studies", s.id), n_jobs=n_jobs, progress=progress,
                         base_dir=cpath.parent, source=str(cpath))
         rep.studies[s.id] = res.metrics
         rep.sweeps[s.id] = res
@@ -103,11 +112,11 @@ def write_reproduction(rep: Reproduction, out: Path, wall: float) -> Path:
     """Write every output of a reproduction into ``out``; returns REPORT.md's path."""
     exp = rep.exp
     for spec in exp.studies:
-        write_figure(out / spec.figure, study_figure(rep, spec))
+        write_figure(_under(out, spec.figure), study_figure(rep, spec))
     for t in rep.thresholds:
         pl_label = f"{t.spec.vary} [{lookup(t.spec.vary).unit}]"
         title = f"Threshold '{t.spec.id}': {t.spec.vary}, {t.input_desc}"
-        write_figure(out / f"threshold_{t.spec.id}.png",
+        write_figure(_under(out, f"threshold_{t.spec.id}.png"),
                      threshold_figure(t.result, t.criteria, pl_label, title))
     claims = verdicts_frame(rep.verdicts)
     write_csv(out / "claims.csv", claims)
@@ -124,7 +133,7 @@ def write_reproduction(rep: Reproduction, out: Path, wall: float) -> Path:
     if rep.ranking is not None:
         write_csv(out / "ranking.csv", rep.ranking)
     for sid, df in rep.studies.items():
-        write_csv(out / "tables" / f"{sid}_metrics.csv", df, float_format="%.9g")
+        write_csv(_under(out, "tables", f"{sid}_metrics.csv"), df, float_format="%.9g")
     report = out / "REPORT.md"
     write_text(report, render_report(rep, wall))
     write_json(out / "manifest.json", manifest(
