@@ -59,6 +59,8 @@ PositiveInt = Annotated[int, BeforeValidator(_not_bool), Field(ge=1)]
 """An integer >= 1 (give the field an upper cap with ``le=``)."""
 NonNegInt = Annotated[int, BeforeValidator(_not_bool), Field(ge=0)]
 """An integer >= 0 (give the field an upper cap with ``le=``)."""
+Integer = Annotated[int, BeforeValidator(_not_bool)]
+"""An integer, not a boolean (give the field its range with ``ge=``/``le=``)."""
 
 MAX_SEED = 2**63 - 1
 """The largest seed accepted (fits a signed 64-bit integer)."""

@@ -16,6 +16,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ema_cli.config.base import (
     FiniteFloat,
+    Integer,
     NonNegFloat,
     PlainName,
     PositiveFloat,
@@ -548,7 +549,7 @@ class OutputsConfig(Strict):
 class ParallelConfig(Strict):
     """How the jobs are spread over cores or a cluster."""
 
-    n_jobs: int | None = Field(
+    n_jobs: Integer | None = Field(
         None, ge=-1, le=MAX_WORKERS,
         description=f"workers (processes or threads, at most {MAX_WORKERS}); None or -1: all "
                     "cores")

@@ -12,6 +12,7 @@ from typing import Any, Literal
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from ema_cli.config.base import (
+    Integer,
     NonNegFloat,
     NonNegInt,
     PlainName,
@@ -179,7 +180,7 @@ class IdentifySettings(Strict):
     runs: PositiveInt = Field(
         1, le=MAX_RUNS,
         description=f"GA runs (seeds SeedSequence(seed).spawn(runs)), 1 .. {MAX_RUNS:,}")
-    n_jobs: int = Field(1, ge=-1, le=MAX_WORKERS,
+    n_jobs: Integer = Field(1, ge=-1, le=MAX_WORKERS,
                         description=f"parallel processes for the runs, 1 .. {MAX_WORKERS} "
                                     "(-1: all cores)")
     seed: Seed = Field(0, description="seed of the GA runs and of the noise (0 .. 2**63-1)")

@@ -302,6 +302,7 @@ def test_sweep_caps(sweep, key, cap):
 
 @pytest.mark.parametrize(("parallel", "key"), [
     ({"n_jobs": 10**6}, "parallel.n_jobs"), ({"n_jobs": -2}, "parallel.n_jobs"),
+    ({"n_jobs": True}, "parallel.n_jobs"),
     ({"chunk_size": 0}, "parallel.chunk_size"), ({"chunk_size": 10**9}, "parallel.chunk_size"),
 ])
 def test_parallel_caps(parallel, key):
@@ -316,6 +317,8 @@ def test_parallel_caps(parallel, key):
     ({"runs": 10**6}, "runs", "10000"),
     ({"runs": 0}, "runs", "1"),
     ({"n_jobs": 10**5}, "n_jobs", "4096"),
+    ({"n_jobs": True}, "n_jobs", "boolean"),
+    ({"ga": {"pop": True}}, "ga.pop", "boolean"),
     ({"ga": {"pc": math.nan}}, "ga.pc", "finite"),
     ({"ga": {"pm": 1.5}}, "ga.pm", "1"),
     ({"ga": {"eta_m": math.inf}}, "ga.eta_m", "finite"),
