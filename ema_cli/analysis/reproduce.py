@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from ema_cli.analysis.claims import Verdict, evaluate_claims
 from ema_cli.analysis.threshold import ThresholdResult, find_threshold, simulation_evaluator
 from ema_cli.config.criteria import Criterion
 from ema_cli.config.experiment import ExperimentConfig, ThresholdSpec
-from ema_cli.config.loader import input_signal, load_config, read_yaml, validate
+from ema_cli.config.loader import input_signal, load_config, validate
 from ema_cli.config.schema import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.identify.settings import IdentifySettings
@@ -60,10 +61,10 @@ class Reproduction:
         return [v for v in self.verdicts if not v.passed]
 
 
-def load_experiment(path: Path) -> ExperimentConfig:
-    """Read and validate an experiment file (errors name the file and key), with the study and
-    threshold configs it names and its identification settings."""
-    exp = validate(ExperimentConfig, read_yaml(path), str(path))
+def load_experiment(path: Path, overrides: Sequence[tuple[str, Any]] = ()) -> ExperimentConfig:
+    """Read and validate an experiment file with ``--set`` overrides (errors name the file and
+    key), with the study and threshold configs it names and its identification settings."""
+    exp = load_config(path, overrides, ExperimentConfig)
     if exp.identification is not None:
         validate(IdentifySettings, exp.identification.settings,
                  f"{path}: identification.settings")

@@ -180,29 +180,52 @@ def parse_value(text: str) -> Any:
 
 
 def apply_overrides(
-    data: dict[str, Any], overrides: Sequence[tuple[str, Any]], top_keys: Sequence[str]
+    data: Mapping[str, Any], overrides: Sequence[tuple[str, Any]], top_keys: Sequence[str]
 ) -> dict[str, Any]:
-    """Set dotted paths in a copy of ``data``; a bare model parameter name means ``plant.NAME``."""
+    """Set dotted paths in a copy of ``data``: the one ``--set PATH=VALUE`` mechanism of every
+    command (and of the Python API's ``overrides``).
+
+    Numbers index lists (``sweep.axes.0.values``); a bare model parameter name means
+    ``plant.NAME`` when the config has a ``plant`` section. String values are read as YAML
+    scalars or lists (``[0.01, 0.1]``, see :func:`parse_value`); other values are used as given.
+    Errors name the path and what was expected.
+    """
     import copy
 
-    out = copy.deepcopy(data)
-    for path, value in overrides:
+    out = copy.deepcopy(dict(data))
+    for path, raw in overrides:
+        path = str(path).strip()
         keys = path.split(".")
-        if len(keys) == 1 and keys[0] not in top_keys and keys[0] in INDEX:
+        if not path or any(not k for k in keys):
+            raise EmaError(f"--set {path!r}: expected a dotted key path such as plant.kL")
+        if len(keys) == 1 and keys[0] not in top_keys and "plant" in top_keys and keys[0] in INDEX:
             keys = ["plant", keys[0]]
         if keys[0] not in top_keys:
-            raise EmaError(
-                f"--set {path}: unknown key '{keys[0]}'; expected one of {sorted(top_keys)} "
-                f"or a model parameter name")
-        node = out
-        for k in keys[:-1]:
-            nxt = node.get(k)
-            if nxt is None:
-                nxt = node[k] = {}
-            if not isinstance(nxt, dict):
-                raise EmaError(f"--set {path}: '{k}' is not a section")
-            node = nxt
-        node[keys[-1]] = parse_value(value) if isinstance(value, str) else value
+            extra = " or a model parameter name" if "plant" in top_keys else ""
+            raise EmaError(f"--set {path}: unknown key '{keys[0]}'; expected one of "
+                           f"{sorted(top_keys)}{extra}")
+        value = parse_value(raw) if isinstance(raw, str) else raw
+        node: Any = out
+        for depth, k in enumerate(keys):
+            last = depth == len(keys) - 1
+            where = ".".join(keys[:depth])
+            if isinstance(node, list):
+                if not k.isdigit() or int(k) >= len(node):
+                    raise EmaError(f"--set {path}: '{where}' is a list of {len(node)} items; "
+                                   f"expected an index 0..{len(node) - 1}")
+                if last:
+                    node[int(k)] = value
+                else:
+                    node = node[int(k)]
+                continue
+            if not isinstance(node, dict):
+                raise EmaError(f"--set {path}: '{where}' is a value, not a section")
+            if last:
+                node[k] = value
+            else:
+                if node.get(k) is None:
+                    node[k] = {}
+                node = node[k]
     return out
 
 
@@ -253,14 +276,30 @@ def _either(msgs: list[str]) -> str:
 
 
 def load_config(
-    path: str | Path | None,
+    source: str | Path | Mapping[str, Any] | BaseModel | None,
     overrides: Sequence[tuple[str, Any]] = (),
     model: type[M] = RunConfig,  # type: ignore[assignment]
 ) -> M:
-    """Load and validate a config file (None: the defaults) with dotted-path overrides."""
-    data = read_yaml(path) if path is not None else {}
+    """Validate a config with dotted-path overrides (:func:`apply_overrides`).
+
+    ``source`` is a YAML file, a dict (the YAML document), a validated model (re-validated
+    with the overrides), or None (every default). Errors name the file (or "dict",
+    "defaults") and the key path.
+    """
+    if source is None:
+        data: dict[str, Any] = {}
+        where = "defaults"
+    elif isinstance(source, BaseModel):
+        data = source.model_dump(mode="json", exclude_unset=True)
+        where = type(source).__name__
+    elif isinstance(source, Mapping):
+        data = dict(source)
+        where = "dict"
+    else:
+        data = read_yaml(source)
+        where = str(source)
     data = apply_overrides(data, overrides, list(model.model_fields))
-    return validate(model, data, str(path) if path is not None else "defaults")
+    return validate(model, data, where)
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from ema_cli.analysis.reproduce import (
     study_config,
 )
 from ema_cli.config.base import check_plain_name
-from ema_cli.config.experiment import StudySpec
+from ema_cli.config.experiment import ExperimentConfig, StudySpec
 from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
 from ema_cli.report.identify_figures import identification_summary
@@ -48,13 +48,15 @@ def _under(out: Path, *names: str) -> Path:
 
 
 def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
-                   progress: bool = True, log: Any = print) -> Reproduction:
-    """Run the whole batch into ``out``; returns the computed Reproduction.
+                   progress: bool = True, log: Any = print,
+                   experiment: ExperimentConfig | None = None) -> Reproduction:
+    """Run the whole batch into ``out``; returns the computed Reproduction. ``experiment``: the
+    validated experiment file (default: read from ``path``).
 
     Each study's sweep folder goes to ``out/studies/<id>``, the identification's to
     ``out/identification``; :func:`write_reproduction` writes the report itself.
     """
-    rep = Reproduction(load_experiment(path), path)
+    rep = Reproduction(experiment if experiment is not None else load_experiment(path), path)
     t0 = time.perf_counter()
     for s in rep.exp.studies:
         cfg, cpath = study_config(path, s.config)

@@ -33,8 +33,11 @@ def write_json(path: Path, data: Any) -> None:
 
 
 def _nan_to_none(o: Any) -> Any:
+    """NaN and infinities -> None, recursively, numpy scalars and arrays included."""
     import math
 
+    if hasattr(o, "tolist") and not isinstance(o, str | bytes):  # numpy scalar or array
+        o = o.tolist()
     if isinstance(o, float) and not math.isfinite(o):
         return None
     if isinstance(o, dict):
@@ -105,9 +108,14 @@ def check_output(out: Path | None, command: str, fingerprint: str | None = None,
                     and mark.get("fingerprint") == fingerprint)
             if resume and same and not mark.get("finished"):
                 return True
-            what = (f"a finished `ema {mark.get('command')}` run" if mark and mark.get("finished")
-                    else f"an unfinished `ema {mark.get('command')}` run of other inputs"
-                    if mark else "other files")
+            if mark is None:
+                what = "other files"
+            elif mark.get("finished"):
+                what = f"a finished `ema {mark.get('command')}` run"
+            elif same:
+                what = f"an unfinished `ema {command}` run of the same inputs (it cannot resume)"
+            else:
+                what = f"an unfinished `ema {mark.get('command')}` run of other inputs"
             raise EmaError(f"--out '{out}' already holds {what}; results are never overwritten: "
                            "choose a new folder or delete that one")
     parent = next((p for p in out.absolute().parents if p.exists()), None)
@@ -157,7 +165,8 @@ def finish_output(folder: Path) -> None:
 
 def new_run_dir(name: str, data_for_hash: Any, out: Path | None = None,
                 command: str | None = None) -> Path:
-    """A new output folder for a run that cannot be resumed (see :func:`prepare_output`)."""
+    """A new output folder for a run that cannot be resumed: :func:`prepare_output` with the
+    content hash of ``data_for_hash`` as fingerprint."""
     folder, _ = prepare_output(command or name, name, content_hash(data_for_hash, 16), out)
     return folder
 
