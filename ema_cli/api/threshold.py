@@ -140,7 +140,8 @@ def threshold(
         crit.check()
         criteria.insert(0, crit)
     if not criteria:
-        raise EmaError("give a requirement: --metric with --limit, or --require METRIC<=VALUE")
+        raise EmaError("give at least one requirement: --metric with --limit, or --require "
+                       "METRIC<=VALUE")
     if direction not in ("max", "min"):
         raise EmaError(f"--direction must be max or min, got {direction!r}")
     rtol = DEFAULT_RTOL if rtol is None else float(rtol)

@@ -58,6 +58,7 @@ def handle_errors(fn: F) -> F:
 def parse_assignments(items: list[str] | None, option: str) -> list[tuple[str, str]]:
     """Parse repeated ``NAME=VALUE`` options, naming ``option`` in any error."""
     out = []
+    seen: dict[str, str] = {}
     for item in items or []:
         if "=" not in item:
             raise EmaError(f"{option} expects NAME=VALUE, got {item!r}")
@@ -65,6 +66,10 @@ def parse_assignments(items: list[str] | None, option: str) -> list[tuple[str, s
         key, value = key.strip(), value.strip()
         if not key or not value:
             raise EmaError(f"{option} expects NAME=VALUE, got {item!r}")
+        if key in seen:
+            raise EmaError(f"{option} {key} is given twice ({seen[key]} and {value}); give it "
+                           "once")
+        seen[key] = value
         out.append((key, value))
     return out
 

@@ -147,9 +147,55 @@ def sweep_cmd(
                        "are cached", 1)
 
 
+KINDS = ("auto", "study", "experiment", "identify")
+"""What `ema validate` can check: a study config, an experiment batch, identification settings."""
+
+
+def detect_kind(config: Path) -> str:
+    """The kind of a config file from its top-level keys (``study`` when unsure)."""
+    from ema_cli.config.loader import read_yaml
+
+    keys = set(read_yaml(config))
+    if keys & {"studies", "claims", "thresholds", "ranking", "identification", "paper"}:
+        return "experiment"
+    if keys & {"k_range", "alpha_range", "c_range", "ga", "synthetic", "method", "fit_c",
+               "columns", "data", "runs"}:
+        return "identify"
+    return "study"
+
+
 @handle_errors
-def validate_cmd(config: ConfigArg, set_: SetOpt = None) -> None:
-    """Check CONFIG against the schema (fast: nothing is simulated) and count its jobs."""
+def validate_cmd(
+    config: ConfigArg,
+    set_: SetOpt = None,
+    kind: Annotated[str, typer.Option(
+        "--kind", help="What CONFIG is: study (`ema sweep`/`simulate`), experiment "
+                       "(`ema reproduce`), identify (`ema identify`) or auto (from its keys).")
+    ] = "auto",
+) -> None:
+    """Check CONFIG against its schema (fast: nothing is simulated); for a study, count its
+    jobs."""
+    if kind not in KINDS:
+        raise EmaError(f"--kind must be one of {', '.join(KINDS)}; got {kind!r}")
+    if kind == "auto":
+        kind = detect_kind(config)
+    overrides = parse_assignments(set_, "--set")
+    if kind == "experiment":
+        from ema_cli.analysis.reproduce import load_experiment
+
+        exp = load_experiment(config, overrides)
+        console.print(f"{config}: valid experiment; {len(exp.studies)} studies, "
+                      f"{len(exp.thresholds)} thresholds, {len(exp.claims)} claims"
+                      + (", an identification" if exp.identification else ""))
+        return
+    if kind == "identify":
+        from ema_cli.config.loader import load_config
+        from ema_cli.identify.settings import IdentifySettings
+
+        s = load_config(config, overrides, IdentifySettings)
+        console.print(f"{config}: valid identification settings; method {s.method}, "
+                      f"{s.runs} run(s), data {s.data or 'synthetic'}")
+        return
     from ema_cli.sweep.expand import check_size
 
     cfg, _ = _load(config, set_)

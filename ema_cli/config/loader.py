@@ -16,7 +16,7 @@ from pydantic import BaseModel, ValidationError
 
 from ema_cli.config.schema import KEY_MARK, RunConfig
 from ema_cli.errors import EmaError
-from ema_cli.model.nonlinearities import nonlinearity_updates
+from ema_cli.model.nonlinearities import combined_updates
 from ema_cli.model.params import INDEX, resolve
 from ema_cli.sim.signals import InputSignal, load_profile
 from ema_cli.units import DEG
@@ -323,8 +323,7 @@ def resolve_params(
     """
     raw: dict[str, Any] = dict(plant)
     base = resolve(raw)
-    for name, value in nonlinearities.items():
-        raw.update(nonlinearity_updates(name, value, base, friction_reading))
+    raw.update(combined_updates(nonlinearities, base, friction_reading))
     return resolve(raw)
 
 

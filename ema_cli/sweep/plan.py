@@ -27,7 +27,7 @@ from ema_cli.hashing import content_hash
 from ema_cli.model.nonlinearities import OFF, lookup
 from ema_cli.model.params import BY_NAME, to_row
 from ema_cli.sim.runner import plan_steps, resolution_warnings, simulate_batch
-from ema_cli.sim.signals import InputSignal, sample
+from ema_cli.sim.signals import InputSignal, sampler
 from ema_cli.sim.tables import MET, SIG, SIGNALS
 from ema_cli.sweep.expand import AxisPoint, JobSpec, expand, neutral_value
 from ema_cli.units import DEG
@@ -216,15 +216,16 @@ def _relative_scales(cfg: StudyConfig, base_params: dict[str, float], sig: Input
               for t in a.targets}
     if not wanted:
         return {}
-    ref = sample(sig, dt, n_steps)
+    ref = sampler(sig, dt, n_steps)
     res = simulate_batch(np.array([to_row(base_params)]), [ref], None, dt, n_steps, dec)
+    peak_ref = ref.max_abs_position() / DEG
     assert res.signals is not None
     w_motor = float(np.nanmax(np.abs(res.signals[0, :, SIG["omega_motor"]])))
     peaks = {
         "deadzone@amplifier": float(res.metrics[0, MET["peak_voltage"]]),
         "deadzone@speed_sensor": w_motor * SIGNALS[SIG["omega_motor"]].factor,
-        "deadzone@position_sensor": float(np.max(np.abs(ref.pos_half))) / DEG,
-        "deadzone@transmission": float(np.max(np.abs(ref.pos_half))) / DEG,
+        "deadzone@position_sensor": peak_ref,
+        "deadzone@transmission": peak_ref,
     }
     return {k: peaks[k] for k in sorted(wanted)}
 
@@ -253,7 +254,8 @@ def _values_and_label(spec: JobSpec, axes: list[AxisInfo], cfg: StudyConfig,
                 if info.kind == "parameter":
                     continue
                 neutral = neutral_value(t)
-                nls.pop(t, None)
+                for other in [k for k in nls if lookup(k) == lookup(t)]:
+                    del nls[other]
                 if neutral is not None:
                     nls[t] = neutral
             if info.kind == "parameter":
@@ -278,6 +280,8 @@ def _values_and_label(spec: JobSpec, axes: list[AxisInfo], cfg: StudyConfig,
             continue
         applied, pct = _apply_point(pt, scales)
         pl = lookup(pt.target)
+        for other in [k for k in nls if k != pt.target and lookup(k) == pl]:
+            del nls[other]  # the axis replaces the study's fixed setting of the same placement
         nls[pt.target] = applied
         if info.kind == "placement":
             values[info.name] = pt.target

@@ -165,3 +165,44 @@ def test_an_unexpected_error_is_one_line_not_a_traceback(monkeypatch, tmp_path):
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and "unexpected RuntimeError: kaboom second line" in lines[0]
     assert "Traceback" not in r.output
+
+
+@pytest.mark.parametrize("args", [
+    ["simulate", "--nl", "deadzone2=0.01", "--nl", "deadzone2=0.02"],
+    ["simulate", "--set", "plant.kL=500", "--set", "plant.kL=600"],
+    ["identify", "--columns", "torque_nm=a", "--columns", "torque_nm=b"],
+])
+def test_an_option_given_twice_is_refused(args):
+    one_clear_line(invoke(*args), "given twice")
+
+
+def test_a_fixed_setting_and_an_axis_on_one_placement():
+    # the sweep axis replaces the study's fixed setting of the same placement, whatever its
+    # name; the baseline removes it
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.schema import StudyConfig
+    from ema_cli.sweep.plan import plan_sweep
+    from ema_cli.units import DEG
+
+    cfg = load_config(CONFIG, [("nonlinearities", {"deadzone@transmission": 0.5}),
+                               ("sweep.axes.0.values", [0.01])], StudyConfig)
+    plan = plan_sweep(cfg)
+    alphas = sorted(j.params["alpha"] / DEG for j in plan.jobs)
+    assert alphas == pytest.approx([0.0, 0.01], rel=1e-12)
+
+
+@pytest.mark.parametrize(("path", "says"), [
+    (ROOT / "experiments" / "paper2020.yaml", "valid experiment"),
+    (ROOT / "configs" / "identify.yaml", "valid identification settings"),
+    (ROOT / "configs" / "deadzone2.yaml", "valid; grid over deadzone2"),
+])
+def test_validate_knows_every_kind_of_file(path, says):
+    r = invoke("validate", str(path))
+    assert r.exit_code == 0 and says in " ".join(r.output.split()), r.output
+
+
+def test_validate_names_the_key_of_an_experiment(tmp_path):
+    p = tmp_path / "e.yaml"
+    p.write_text("name: e\nstudies: []\nclaims: []\n")
+    r = invoke("validate", str(p))
+    assert r.exit_code == 2 and "e.yaml" in r.output and "Traceback" not in r.output

@@ -156,8 +156,10 @@ def test_data_that_never_reach_contact(csv_dir):
     (["--k-range", 700, 500], "k_range needs LO < HI"),
     (["--method", "simplex"], "method"),
     (["--model", "coulomb"], "model"),
-    (["--pc", 1.5], "ga.pc"),
-    (["--noise", -1], "noise_pct"),
+    (["--pc", 1.5], "--pc"),
+    (["--set", "ga.pc=1.5"], "ga.pc"),
+    (["--noise", -1], "--noise"),
+    (["--set", "synthetic.noise_pct=-1"], "noise_pct"),
 ])
 def test_bad_options_fail_clearly(args, message):
     r, text = invoke(*args)
@@ -172,7 +174,7 @@ def test_noise_with_data_is_refused_and_out_must_be_empty(tmp_path, csv_dir):
     out.mkdir()
     (out / "x.txt").write_text("keep me")
     r, text = invoke("--method", "exact", "--out", out)
-    assert r.exit_code == 2 and "is not empty" in text
+    assert r.exit_code == 2 and "never overwritten" in text
 
 
 def test_optimum_outside_the_k_range_warns(tmp_path):
