@@ -22,6 +22,7 @@ is refused (``off`` removes a saturation; a compliance cannot be removed).
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
@@ -67,6 +68,9 @@ def _number(name: str, value: float | str, unit: str, allow_off: bool) -> float 
                 f"'{name}' expects a number in {unit}{' or off' if allow_off else ''}, "
                 f"got {value!r}"
             ) from None
+    if not isinstance(value, numbers.Real):  # None, a list, a mapping...
+        raise EmaError(f"'{name}' expects a number in {unit}{' or off' if allow_off else ''}, "
+                       f"got {value!r}")
     x = float(value)
     if not math.isfinite(x) or x < 0:
         raise EmaError(f"'{name}' must be a finite number >= 0 in {unit}, got {value!r}")

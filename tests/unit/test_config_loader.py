@@ -427,3 +427,12 @@ def test_input_signal_bad_load_profile_names_file(tmp_path):
     with pytest.raises(EmaError) as ei:
         input_signal(InputConfig(), tmp_path, LoadConfig(profile="gust.csv"))
     assert str(tmp_path / "gust.csv") in ei.value.message and "torque_nm" in ei.value.message
+
+
+def test_run_config_reads_yaml_off_as_off(tmp_path):
+    # YAML 1.1 reads unquoted off as False; every config model turns it back into the word
+    p = tmp_path / "c.yaml"
+    p.write_text("plant:\n  sat2: off\nnonlinearities:\n  friction1: off\n")
+    params = resolve_run(load_config(p)).params
+    assert params["sat2"] == math.inf
+    assert params["friction"] == 0.0

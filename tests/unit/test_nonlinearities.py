@@ -189,3 +189,9 @@ def test_friction_scale_reading():
 def test_friction_reading_must_be_known():
     with pytest.raises(EmaError, match=r"friction reading must be one of \('sigma2', 'scale'\)"):
         nonlinearity_updates("friction1", 0.01, BASE, "coulomb")
+
+
+@pytest.mark.parametrize("value", [None, [1], {"a": 1}])
+def test_a_magnitude_that_is_not_a_number_is_named(value):
+    with pytest.raises(EmaError, match="'deadzone2' expects a number"):
+        nonlinearity_updates("deadzone2", value, resolve())

@@ -296,3 +296,11 @@ def test_overlay_figure_labels_units_title_legend():
         np.testing.assert_array_equal(curves[1].get_ydata(), ts2["err_pos_deg"])
     finally:
         plt.close(fig)
+
+
+@pytest.mark.parametrize("data", [{"x": np.float32("nan")}, {"x": np.array([1.0, np.nan])},
+                                  {"x": [np.inf]}])
+def test_write_json_turns_numpy_nan_into_null(tmp_path, data):
+    write_json(tmp_path / "m.json", data)
+    back = json.loads((tmp_path / "m.json").read_text())
+    assert None in (back["x"] if isinstance(back["x"], list) else [back["x"]])
