@@ -328,10 +328,14 @@ def resolve_params(
 
 
 def _local(path: str, base_dir: Path | None) -> Path:
-    """A path from a config: as given, else relative to the config's folder."""
+    """A path from a config: relative paths are relative to the config's folder (``base_dir``),
+    else to the working folder (a config given as a dict, or a file found only there)."""
     p = Path(path)
-    if not p.is_absolute() and base_dir is not None and not p.exists():
-        p = base_dir / p
+    if p.is_absolute() or base_dir is None:
+        return p
+    beside = base_dir / p
+    if beside.exists() or not p.exists():
+        return beside
     return p
 
 
