@@ -520,7 +520,11 @@ class OutputsConfig(Strict):
     """What a sweep writes besides metrics.csv, manifest.json and the resolved config."""
 
     timeseries: bool = Field(
-        True, description="write timeseries/<job>.csv, decimated at simulation.output_interval_s")
+        True, description="record every job's signals every simulation.output_interval_s into "
+                          "signals.parquet (one file, one row per job and sample)")
+    per_job_csv: bool = Field(
+        False, description="also write timeseries/<job>.csv, one CSV per job (slow and large "
+                           "for big sweeps: signals.parquet holds the same values)")
     figures: list[Literal["errors", "response", "metrics"]] = Field(
         default_factory=lambda: ["errors", "metrics"],
         description="figures to draw: errors (tracking-error overlays), response (position and "
@@ -543,7 +547,8 @@ class OutputsConfig(Strict):
     @property
     def needs_signals(self) -> bool:
         """True when the decimated time series must be recorded."""
-        return self.timeseries or "errors" in self.figures or "response" in self.figures
+        return (self.timeseries or self.per_job_csv or "errors" in self.figures
+                or "response" in self.figures)
 
 
 class ParallelConfig(Strict):

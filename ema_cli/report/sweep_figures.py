@@ -1,7 +1,8 @@
 """Sweep figures: overlays of runs vs time and metrics vs magnitude (return Figures, no I/O).
 
-Time series are tables in edge units (``SweepResult.timeseries``); metric tables are rows of
-``metrics.csv``. Labels carry magnitudes with their units; logarithmic magnitudes get log axes.
+Time series are tables in edge units (``SweepResult.timeseries``: one job's rows of
+signals.parquet once the sweep has written it, else the recorded arrays); metric tables are rows
+of ``metrics.csv``. Labels carry magnitudes with their units; logarithmic magnitudes get log axes.
 """
 
 from __future__ import annotations

@@ -1,24 +1,38 @@
-"""A sweep's output folder: resolved config, manifest, metrics.csv, time series, figures, summary.
+"""A sweep's output folder: resolved config, manifest, metrics.csv, signals, figures, summary.
 
 Layout of ``results/<name>/<stamp>_<hash>/`` (or ``--out``)::
 
     config.resolved.yaml      the validated config, every default filled in
     manifest.json             version, git commit, seed, job counts, timings, per-job status
     metrics.csv               one row per job: swept values (paper units) + every metric
-    timeseries/<job>.csv      decimated signals of each job (edge units), if asked
+    signals.parquet           the recorded signals of every job (outputs.timeseries), long
+                              layout: job, swept values, t_s, one column per signal (edge units)
+    timeseries/<job>.csv      the same per job, only if outputs.per_job_csv (slow for big sweeps)
     figures/*.png             overlays vs time per axis, metrics vs magnitude per axis
     summary.md                the metrics table and the figures
 
-Every file is written atomically (temporary sibling + rename). :func:`run_sweep` runs a sweep
-(``sweep.run.compute_sweep``) and writes this folder as it goes.
+Every file is written atomically (temporary sibling + rename); signals.parquet is streamed into
+its temporary sibling as chunks finish (:class:`SignalsWriter`) and renamed into place only
+when the sweep completes, so an interrupted sweep leaves neither a partial file nor the
+temporary one. :func:`run_sweep` runs a sweep (``sweep.run.compute_sweep``) and writes this
+folder as it goes.
+
+Why Parquet for the signals: one typed, compressed, columnar file instead of one CSV per job
+(a 401-job sweep spent 85.7 s of 92.6 s writing 620 MB of CSV text). pandas
+(``pd.read_parquet``), polars, DuckDB and R (arrow) read it natively; a reader loads only the
+columns it names and skips the row groups whose job-id statistics exclude the jobs it filters
+on; floats stay binary float64, exact. netCDF or Zarr would need xarray and a
+dimensioned layout for no gain here. The file's schema metadata (key ``ema``) records the ema
+version, the sweep, the time grid and every column's unit.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -26,23 +40,34 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from ema_cli import __version__
 from ema_cli.errors import EmaError
+from ema_cli.files import AtomicFile
 from ema_cli.report.rundir import (
     manifest,
-    new_run_dir,
+    prepare_output,
     write_csv,
     write_figure,
     write_json,
     write_text,
 )
-from ema_cli.sim.tables import METRIC_BY_EDGE
-from ema_cli.sweep.run import SweepResult, compute_sweep
-from ema_cli.units import DEG
+from ema_cli.sim.tables import METRIC_BY_EDGE, N_SIGNALS, SIGNALS, Column
+from ema_cli.sweep.cache import DEFAULT_CACHE_DIR
+from ema_cli.sweep.run import JOB_COLUMN, TIME_COLUMN, SweepResult, compute_sweep
+from ema_cli.units import DEG, RPM
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from ema_cli.config.schema import StudyConfig
     from ema_cli.sweep.plan import AxisInfo, Plan
 
+SIGNALS_FILE = "signals.parquet"
+ROW_GROUP_BYTES = 32 * 2**20  # target uncompressed size of one row group of signals.parquet
+PARQUET_COMPRESSION = "snappy"  # fast and read everywhere; floats compress little anyway
+COPY_BLOCK_BYTES = 2 * 2**20  # signals transposed into columns at a time (stay in cache)
+PARQUET_BATCH_VALUES = 65536  # values the writer encodes at a time (pyarrow's default: 1024)
+PARQUET_PAGE_BYTES = 4 * 2**20  # data page size (pyarrow's default: 1 MiB)
 MAX_GROUPS_PER_AXIS = 3  # overlays per axis when other axes vary: first, middle, last value
 MAX_METRIC_LINES = 10  # most lines (combinations of the other axes) in one metric plot
 MAX_SUMMARY_ROWS = 200  # rows of the metrics table in summary.md (metrics.csv has all)
@@ -118,20 +143,33 @@ def run_sweep(
 
     out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
                reused only if it holds an earlier run of the same sweep (resume in place).
+    cache_dir  job cache; None: ``results/.cache/sweep`` when writing, no cache otherwise
     overrides  the ``--set`` pairs, recorded in the manifest
-    write      False: write nothing (no folder); the time series stay readable from the cache
+    write      False: write nothing (no folder, and no cache unless ``cache_dir`` is given);
+               the recorded signals stay readable from the result (kept in memory)
 
     The other arguments are ``compute_sweep``'s. The folder is created once the sweep is
-    planned, before any job runs; on Ctrl-C the outputs of the finished jobs are written and
-    KeyboardInterrupt is re-raised. A failed job's error text goes into the manifest.
+    planned, before any job runs; signals.parquet is streamed as chunks finish and renamed
+    into place when the sweep ends. On Ctrl-C (or an error) metrics.csv, summary.md and the
+    manifest of the finished jobs are written, the unfinished signals file is deleted, and the
+    exception is re-raised. A failed job's error text goes into the manifest.
     """
     t_start = time.perf_counter()
     folder: Path | None = None
+    writer: SignalsWriter | None = None
+    if cache_dir is None and write:
+        cache_dir = DEFAULT_CACHE_DIR
 
     def on_start(plan: Plan) -> None:
-        nonlocal folder
+        nonlocal folder, writer
         if write:
             folder = prepare_folder(plan, out, overrides)
+            if plan.cfg.outputs.timeseries and plan.dec > 0:
+                writer = SignalsWriter(folder / SIGNALS_FILE, plan)
+
+    def on_signals(jobs: Sequence[int], rows: Sequence[int], signals: np.ndarray) -> None:
+        if writer is not None:
+            writer.add(jobs, rows, signals)
 
     def on_finish(result: SweepResult, aborted: bool) -> None:
         result.folder = folder
@@ -139,36 +177,267 @@ def run_sweep(
             return
         timings = result.timings
         t2 = time.perf_counter()
+        failed: EmaError | None = None
         try:
-            write_outputs(result, partial=aborted)
+            if writer is not None and not aborted:
+                try:
+                    result.signals_file = writer.commit()
+                except EmaError as exc:  # e.g. disk full: the other outputs are still written
+                    failed = exc
+            write_outputs(result, partial=aborted or failed is not None)
         except KeyboardInterrupt:  # Ctrl-C while writing: the manifest still says so
             result.interrupted = True
             raise
         finally:
+            if writer is not None:
+                writer.discard()  # after a commit: nothing left to delete
             timings["outputs"] = time.perf_counter() - t2
             timings["total"] = time.perf_counter() - t_start
-            write_manifest(result, overrides)
+            write_manifest(result, overrides, failed.message if failed else None)
+        if failed is not None:
+            raise failed
 
     return compute_sweep(cfg, n_jobs, backend, force, progress, scheduler=scheduler,
                          chunk_size=chunk_size, cache_dir=cache_dir, base_dir=base_dir,
-                         source=source, on_start=on_start, on_finish=on_finish)
+                         source=source, on_start=on_start, on_signals=on_signals,
+                         on_finish=on_finish)
+
+
+def save_sweep(result: SweepResult, out: Path | None = None,
+               overrides: Sequence[tuple[str, Any]] = ()) -> Path:
+    """Write the folder ``ema sweep`` writes for a sweep computed without one (the Python
+    API's ``Sweep.save``) -> the folder; ``out`` None: a new one under ``results/<name>/``."""
+    t0 = time.perf_counter()
+    plan = result.plan
+    folder = result.folder = prepare_folder(plan, out, overrides)
+    if plan.cfg.outputs.timeseries and plan.dec > 0:
+        writer = SignalsWriter(folder / SIGNALS_FILE, plan)
+        try:
+            status = result.metrics["status"]
+            for j in plan.jobs:
+                if status.iloc[j.index] in FINISHED:
+                    writer.add([j.index], [0], result.signals(j.index)[None])
+            result.signals_file = writer.commit()
+        finally:
+            writer.discard()
+    write_outputs(result)
+    result.timings["outputs"] = time.perf_counter() - t0
+    write_manifest(result, overrides)
+    return folder
+
+
+class SignalsWriter:
+    """Streams a sweep's recorded signals into ``signals.parquet`` as jobs finish.
+
+    Long layout, one row per job and sample: ``job`` (id, dictionary-encoded), the swept
+    values (metrics.csv's columns and units; a column mixing numbers and words such as 'off'
+    is text), ``t_s``, then every signal of ``sim.tables.SIGNALS`` in edge units
+    (``theta_load_deg``, ``omega_motor_rpm``, ...), float64. A job's rows are contiguous, in
+    time order; jobs come in the order they finish (cached ones first, then each chunk's: job
+    order for a fresh sweep on one machine). Jobs are gathered into row
+    groups of about ``ROW_GROUP_BYTES``; ``job``, the swept values and ``t_s`` carry
+    statistics (row-group filtering by job), the signals none (they cost time and no reader
+    filters on them). Rows go into a temporary sibling: :meth:`commit` renames it into place,
+    :meth:`discard` (or any error while writing) deletes it.
+    """
+
+    def __init__(self, path: Path, plan: Plan) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        self.path = path
+        self.plan = plan
+        self.n_out = plan.n_steps // plan.dec + 1
+        self.rows = 0
+        self._pa = pa
+        self._numeric: dict[str, np.ndarray] = {}
+        self._text: dict[str, list[str | None]] = {}
+        self._swept = list(dict.fromkeys(c for info in plan.axes for c in info.columns))
+        for c in self._swept:
+            values = [j.values.get(c, math.nan) for j in plan.jobs]
+            if any(isinstance(v, str) for v in values):
+                self._text[c] = [v if isinstance(v, str) else None if math.isnan(v) else
+                                 repr(float(v)) for v in values]
+            else:
+                self._numeric[c] = np.array(values, dtype=np.float64)
+        swept = self._swept
+        width = 2 + len(swept) + N_SIGNALS  # columns of 8 bytes or fewer
+        self.group_jobs = max(1, min(len(plan.jobs), ROW_GROUP_BYTES // (self.n_out * 8 * width)))
+        self._buf: np.ndarray | None = None  # [N_SIGNALS, group_jobs * n_out], edge units
+        self._block = max(1, COPY_BLOCK_BYTES // (self.n_out * N_SIGNALS * 8))
+        self._jobs: list[int] = []  # job index of each job in the buffer
+        self._index = np.repeat(np.arange(self.group_jobs, dtype=np.int32), self.n_out)
+        self._t = np.tile(np.arange(self.n_out) * (plan.dec * plan.dt), self.group_jobs)
+        self.schema = signals_schema(plan, swept, self._text)
+        self._file = AtomicFile(path)
+        self._writer = None
+        try:
+            self._writer = pq.ParquetWriter(
+                self._file.tmp, self.schema, compression=PARQUET_COMPRESSION,
+                write_batch_size=PARQUET_BATCH_VALUES, data_page_size=PARQUET_PAGE_BYTES,
+                use_dictionary=[JOB_COLUMN, *swept, TIME_COLUMN, *DICTIONARY_SIGNALS],
+                write_statistics=[JOB_COLUMN, *swept, TIME_COLUMN])
+        except BaseException as exc:
+            self.discard()
+            self._raise(exc)
+
+    def _raise(self, exc: BaseException) -> None:
+        if isinstance(exc, OSError):
+            raise EmaError(f"cannot write '{self.path}': {exc}", 1) from None
+        raise exc
+
+    def add(self, jobs: Sequence[int], rows: Sequence[int], signals: np.ndarray) -> None:
+        """Append job ``jobs[i]``'s SI ``signals[rows[i]]`` ([n_out, N_SIGNALS])."""
+        try:
+            if self._buf is None:
+                self._buf = np.empty((N_SIGNALS, self.group_jobs * self.n_out))
+            rows = np.asarray(rows, dtype=np.int64)
+            i = 0
+            while i < len(rows):
+                # a block of consecutive rows that fits the CPU cache (and the row group)
+                m = min(self._block, self.group_jobs - len(self._jobs), len(rows) - i)
+                r0 = int(rows[i])
+                if not np.array_equal(rows[i:i + m], np.arange(r0, r0 + m)):
+                    m = 1
+                src = signals[r0:r0 + m]  # [m, n_out, N_SIGNALS], SI
+                a = len(self._jobs) * self.n_out
+                for k, c in enumerate(SIGNALS):  # to edge units, one column at a time
+                    out = self._buf[k, a:a + m * self.n_out].reshape(m, self.n_out)
+                    if c.factor == 1.0:
+                        np.copyto(out, src[:, :, k])
+                    else:
+                        np.multiply(src[:, :, k], c.factor, out=out)
+                self._jobs.extend(jobs[i:i + m])
+                i += m
+                if len(self._jobs) == self.group_jobs:
+                    self._flush()
+        except BaseException as exc:
+            self.discard()
+            self._raise(exc)
+
+    def _flush(self) -> None:
+        """Write the buffered jobs as one row group."""
+        pa = self._pa
+        m = len(self._jobs)
+        if m == 0 or self._buf is None or self._writer is None:
+            return
+        n = m * self.n_out
+        index = pa.array(self._index[:n])
+        jobs = np.array(self._jobs)
+
+        def text(values: list[str | None]) -> Any:
+            code = {v: k for k, v in enumerate(dict.fromkeys(v for v in values if v is not None))}
+            codes = np.repeat(np.array([code.get(v, -1) for v in values], dtype=np.int32),
+                              self.n_out)  # -1: no value (null)
+            return pa.DictionaryArray.from_arrays(pa.array(codes, mask=codes < 0),
+                                                  pa.array(list(code), pa.string()))
+
+        columns: list[Any] = [pa.DictionaryArray.from_arrays(
+            index, pa.array([self.plan.jobs[i].id for i in jobs], pa.string()))]
+        for c in self._swept:
+            if c in self._numeric:
+                columns.append(pa.array(np.repeat(self._numeric[c][jobs], self.n_out)))
+            else:
+                columns.append(text([self._text[c][i] for i in jobs]))
+        columns.append(pa.array(self._t[:n]))
+        columns += [pa.array(self._buf[k, :n]) for k in range(N_SIGNALS)]
+        table = pa.Table.from_arrays(columns, schema=self.schema)
+        self._writer.write_table(table, row_group_size=n)
+        self.rows += n
+        self._jobs = []
+
+    def commit(self) -> Path:
+        """Write the last row group, close the file and rename it into place."""
+        try:
+            self._flush()
+            assert self._writer is not None
+            self._writer.close()
+            self._writer = None
+            return self._file.commit()
+        except BaseException as exc:
+            self.discard()
+            self._raise(exc)
+            raise  # not reached
+
+    def discard(self) -> None:
+        """Close and delete the unfinished file (a no-op after :meth:`commit`)."""
+        if self._writer is not None:
+            writer, self._writer = self._writer, None
+            with contextlib.suppress(Exception):  # the file is deleted anyway
+                writer.close()
+        self._file.discard()
+
+
+DICTIONARY_SIGNALS = ("theta_ref_deg", "omega_ref_deg_s", "torque_load_nm")
+"""Signals the same for every job of most sweeps (the input, the external torque):
+dictionary-encoded, they shrink to almost nothing."""
+
+
+def edge_unit(col: Column) -> str:
+    """The unit of a signal or metric column at the edge (``deg``, ``rpm``, ``N*m``, ...)."""
+    if math.isclose(col.factor, 1 / DEG):
+        return col.si_unit.replace("rad", "deg")
+    if math.isclose(col.factor, 1 / DEG**2):
+        return col.si_unit.replace("rad^2", "deg^2")
+    if math.isclose(col.factor, 1 / RPM):
+        return "rpm"
+    return col.si_unit
+
+
+def _swept_units(plan: Plan) -> dict[str, str]:
+    units: dict[str, str] = {}
+    for info in plan.axes:
+        for c in info.columns:
+            if c.endswith("_pct"):
+                units[c] = "%"
+            elif info.kind == "parameter" or c == info.columns[-1] and info.kind != "placement":
+                units[c] = _unit_of(info)
+            elif c.endswith("_magnitude"):
+                units[c] = info.unit or f"see {info.name}_unit"
+    return units
+
+
+def signals_schema(plan: Plan, swept: Sequence[str], text: Any) -> Any:
+    """The Arrow schema of signals.parquet, with units and provenance in its metadata."""
+    import pyarrow as pa
+
+    units = _swept_units(plan)
+    dict_text = pa.dictionary(pa.int32(), pa.string())
+
+    def meta(unit: str | None, description: str) -> dict[str, str]:
+        return {"description": description, **({"unit": unit} if unit else {})}
+
+    fields = [pa.field(JOB_COLUMN, dict_text, nullable=False,
+                       metadata=meta(None, "job id, as in metrics.csv"))]
+    for c in swept:  # floats are never null (NaN is a value): no definition levels to write
+        fields.append(pa.field(c, dict_text if c in text else pa.float64(),
+                               nullable=c in text,
+                               metadata=meta(units.get(c), "swept value, as in metrics.csv")))
+    fields.append(pa.field(TIME_COLUMN, pa.float64(), nullable=False,
+                           metadata=meta("s", "time")))
+    fields += [pa.field(c.edge, pa.float64(), nullable=False,
+                        metadata=meta(edge_unit(c), c.description)) for c in SIGNALS]
+    info = {
+        "ema_version": __version__, "sweep": plan.cfg.name, "sweep_key": plan.key,
+        "layout": "long: one row per job and sample; filter on 'job' for one run",
+        "jobs": len(plan.jobs), "samples_per_job": plan.n_steps // plan.dec + 1,
+        "dt_s": plan.dt, "output_interval_s": plan.dec * plan.dt,
+        "duration_s": plan.duration, "input": plan.signal.describe(),
+        "units": {f.name: f.metadata[b"unit"].decode() for f in fields
+                  if f.metadata and b"unit" in f.metadata},
+    }
+    return pa.schema(fields, metadata={"ema": json.dumps(info)})
 
 
 def prepare_folder(plan: Plan, out: Path | None, overrides: Sequence[tuple[str, Any]]) -> Path:
     """Create the output folder before any job runs (so a bad ``--out`` loses nothing).
 
-    An existing non-empty ``out`` is reused only if its manifest is an earlier run of the same
-    sweep (resume in place); anything else is refused, never overwritten.
+    The one ``--out`` policy (``rundir.prepare_output``): a new or empty folder, or an earlier
+    run of the same sweep (same ``plan.key``), which is resumed in place. A sweep folder is
+    never marked finished: the same sweep always gives the same outputs, so running it again
+    there only completes or rewrites them. Anything else is refused, never overwritten.
     """
-    if out is not None and out.exists():
-        if not out.is_dir():
-            raise EmaError(f"--out '{out}' is a file; expected a folder")
-        if any(out.iterdir()):
-            prev = _read_manifest(out)
-            if prev.get("command") != "sweep" or prev.get("sweep_key") != plan.key:
-                raise EmaError(f"output folder '{out}' exists and holds another run; choose "
-                               "another --out (run folders are never overwritten)")
-    folder = new_run_dir(plan.cfg.name, plan.key, out)
+    folder, _ = prepare_output("sweep", plan.cfg.name, plan.key, out, resume=True)
     write_text(folder / "config.resolved.yaml",
                yaml.safe_dump(plan.cfg.model_dump(mode="json"), sort_keys=False))
     write_json(folder / "manifest.json", {  # provisional: identifies the sweep for a resume
@@ -177,21 +446,16 @@ def prepare_folder(plan: Plan, out: Path | None, overrides: Sequence[tuple[str, 
     return folder
 
 
-def _read_manifest(folder: Path) -> dict[str, Any]:
-    try:
-        return json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-
-
-def write_manifest(result: SweepResult, overrides: Sequence[tuple[str, Any]]) -> None:
-    """manifest.json: provenance, job counts, timings and every job's status and error."""
+def write_manifest(result: SweepResult, overrides: Sequence[tuple[str, Any]],
+                   error: str | None = None) -> None:
+    """manifest.json: provenance, job counts, timings and every job's status and error;
+    ``error``: why the outputs are incomplete (e.g. signals.parquet could not be written)."""
     plan, folder = result.plan, result.folder
     assert folder is not None
     counts = result.counts()
     if result.interrupted:
         state = "interrupted"
-    elif counts["failed"] or counts["pending"]:
+    elif counts["failed"] or counts["pending"] or error:
         state = "incomplete"
     else:
         state = "complete"
@@ -207,33 +471,50 @@ def write_manifest(result: SweepResult, overrides: Sequence[tuple[str, Any]]) ->
         job_counts={"total": len(plan.jobs), "unique_runs": plan.n_unique,
                     "computed": result.computed, "cached": result.cached, **counts},
         wall_time_s=result.timings.get("total"), timings_s=result.timings,
-        backend=result.backend, workers=result.workers, cache_dir=result.cache.root,
-        relative_scales=plan.scales, warnings=plan.warnings, notes=plan.notes,
+        backend=result.backend, workers=result.workers,
+        cache_dir=result.cache.root if result.cache is not None else None,
+        cache_corrupt_entries=result.cache_corrupt,
+        signals_file=(str(result.signals_file.relative_to(folder))
+                      if result.signals_file is not None else None),
+        relative_scales=plan.scales, warnings=result.warnings, notes=plan.notes,
         overrides=[list(o) for o in overrides], figures=[str(p.relative_to(folder))
                                                          for p in result.figures],
-        jobs=jobs))
+        **({"error": error} if error else {}), jobs=jobs))
 
 
 def write_outputs(result: SweepResult, partial: bool = False) -> None:
-    """Write metrics.csv, the time series, the figures and summary.md (then call
-    :func:`write_manifest`). ``partial`` (an aborted sweep): only metrics.csv and summary.md.
+    """Write metrics.csv, the per-job CSVs (if asked), the figures and summary.md (then call
+    :func:`write_manifest`; signals.parquet is already in place). ``partial`` (an aborted
+    sweep): only metrics.csv and summary.md.
     """
     folder = result.folder
     assert folder is not None
     write_csv(folder / "metrics.csv", result.metrics, float_format=CSV_FORMAT)
     if not partial:
-        if result.plan.cfg.outputs.timeseries and result.plan.dec > 0:
-            _write_timeseries(result, folder / "timeseries")
+        if result.plan.cfg.outputs.per_job_csv and result.plan.dec > 0:
+            _write_job_csvs(result, folder / "timeseries")
         result.figures = _write_figures(result, folder / "figures")
     write_text(folder / "summary.md", summary_markdown(result))
 
 
-def _write_timeseries(result: SweepResult, folder: Path) -> None:
-    df = result.metrics
-    for j in result.plan.jobs:
-        path = folder / f"{j.id}.csv"
-        if df["status"].iloc[j.index] in FINISHED:
-            write_csv(path, result.timeseries(j.id), float_format=CSV_FORMAT)
+def _write_job_csvs(result: SweepResult, folder: Path) -> None:
+    """timeseries/<job>.csv for every finished job (t_s, then every signal in edge units):
+    read row group by row group from signals.parquet when it was written."""
+    columns = [TIME_COLUMN, *(c.edge for c in SIGNALS)]
+    if result.signals_file is None:
+        df = result.metrics
+        for j in result.plan.jobs:
+            if df["status"].iloc[j.index] in FINISHED:
+                write_csv(folder / f"{j.id}.csv", result.timeseries(j.id),
+                          float_format=CSV_FORMAT)
+        return
+    import pyarrow.parquet as pq
+
+    pf = pq.ParquetFile(result.signals_file)
+    for g in range(pf.num_row_groups):
+        table = pf.read_row_group(g, columns=[JOB_COLUMN, *columns]).to_pandas()
+        for job, rows in table.groupby(JOB_COLUMN, sort=False, observed=True):
+            write_csv(folder / f"{job}.csv", rows[columns], float_format=CSV_FORMAT)
 
 
 # --------------------------------------------------------------------------------- figures
@@ -283,23 +564,36 @@ def _slug(text: str) -> str:
     return "-".join(p for p in keep.split("-") if p)[:80]
 
 
+def sweep_figures(result: SweepResult, kinds: Sequence[str] | None = None
+                  ) -> list[tuple[str, Figure]]:
+    """The sweep's figures as (file stem, Figure), as ``ema sweep`` draws them: ``kinds`` of
+    errors, response, metrics (default: ``outputs.figures``). The caller closes them."""
+    return list(_figures(result, kinds))
+
+
 def _write_figures(result: SweepResult, folder: Path) -> list[Path]:
+    paths = []
+    for name, fig in _figures(result):  # one at a time: each is closed once written
+        path = folder / f"{name}.png"
+        write_figure(path, fig)
+        paths.append(path)
+    return paths
+
+
+def _figures(result: SweepResult, kinds: Sequence[str] | None = None
+             ) -> Iterator[tuple[str, Figure]]:
     plan = result.plan
-    if not plan.cfg.outputs.figures:
-        return []
-    wanted = plan.cfg.outputs.figures
+    wanted = plan.cfg.outputs.figures if kinds is None else kinds
     df = _finished(result)
-    paths: list[Path] = []
-    if df.empty:
-        return paths
+    if not wanted or df.empty:
+        return
     axes = plan.axes[:1] if plan.cfg.sweep.mode == "zip" else plan.axes
     for info in axes:
         for kind in ("errors", "response"):
             if kind in wanted and plan.dec > 0:
-                paths += _overlays(result, df, info, kind, folder)
+                yield from _overlays(result, df, info, kind)
         if "metrics" in wanted:
-            paths += _metric_plots(result, df, info, folder)
-    return paths
+            yield from _metric_plots(result, df, info)
 
 
 def _baseline_series(result: SweepResult, df: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
@@ -309,12 +603,12 @@ def _baseline_series(result: SweepResult, df: pd.DataFrame) -> list[tuple[str, p
     return [("baseline (swept nonlinearities off)", result.timeseries(int(base["_index"].iloc[0])))]
 
 
-def _overlays(result: SweepResult, df: pd.DataFrame, info: AxisInfo, kind: str,
-              folder: Path) -> list[Path]:
+def _overlays(result: SweepResult, df: pd.DataFrame, info: AxisInfo,
+              kind: str) -> Iterator[tuple[str, Figure]]:
+    """Overlays vs time; the curves are read from signals.parquet once it is written."""
     plan = result.plan
     what, columns, reference = OVERLAYS[kind]
     zip_mode = plan.cfg.sweep.mode == "zip"
-    paths = []
     for g, group in enumerate(_evenly(_groups(result, df, info.index), MAX_GROUPS_PER_AXIS)):
         subsets: list[tuple[str, str, pd.DataFrame]] = [("", "", group)]
         if info.group_column is not None:  # one overlay per placement, then per shared value
@@ -342,10 +636,7 @@ def _overlays(result: SweepResult, df: pd.DataFrame, info: AxisInfo, kind: str,
             fig = overlay_figure(series, title, columns, legend_title=per, reference=reference)
             name = f"{kind}_{info.name}" + (f"_{file_tag}" if file_tag else "") + (
                 f"_g{g}" if len(_groups(result, df, info.index)) > 1 else "")
-            path = folder / f"{name}.png"
-            write_figure(path, fig)
-            paths.append(path)
-    return paths
+            yield name, fig
 
 
 def _baseline_label(info: AxisInfo, baseline: pd.Series | None) -> str:
@@ -366,8 +657,8 @@ def _unit_of(info: AxisInfo) -> str:
     return lookup(info.targets[0]).unit
 
 
-def _metric_plots(result: SweepResult, df: pd.DataFrame, info: AxisInfo,
-                  folder: Path) -> list[Path]:
+def _metric_plots(result: SweepResult, df: pd.DataFrame,
+                  info: AxisInfo) -> Iterator[tuple[str, Figure]]:
     from ema_cli.report.sweep_figures import category_figure, metric_figure  # matplotlib
 
     plan = result.plan
@@ -398,16 +689,14 @@ def _metric_plots(result: SweepResult, df: pd.DataFrame, info: AxisInfo,
             b = baseline.copy()
             b["_category"] = "baseline"
             rows = pd.concat([b.to_frame().T, rows])
-        fig = category_figure(rows, "_category", "run" if zipped else info.name, metrics, title)
-        path = folder / f"metrics_{info.name}.png"
-        write_figure(path, fig)
-        return [path]
+        yield f"metrics_{info.name}", category_figure(
+            rows, "_category", "run" if zipped else info.name, metrics, title)
+        return
     targets: list[tuple[str, pd.DataFrame]] = [("", rows)]
     group_col = info.group_column
     if info.group_column is not None and not info.unit:  # mixed units: one figure per target
         targets = [(str(t), sub) for t, sub in rows.groupby(info.group_column, sort=False)]
         group_col = None
-    paths = []
     for tag, sub in targets:
         if multi:
             sub = sub.copy()
@@ -424,10 +713,7 @@ def _metric_plots(result: SweepResult, df: pd.DataFrame, info: AxisInfo,
                             None if multi else baseline,
                             legend_title=info.name if group_col == info.group_column else
                             "other axes", baseline_label=_baseline_label(info, baseline))
-        path = folder / (f"metrics_{info.name}" + (f"_{_slug(tag)}" if tag else "") + ".png")
-        write_figure(path, fig)
-        paths.append(path)
-    return paths
+        yield f"metrics_{info.name}" + (f"_{_slug(tag)}" if tag else ""), fig
 
 
 # --------------------------------------------------------------------------------- summary
@@ -455,6 +741,10 @@ def summary_markdown(result: SweepResult) -> str:
         f"{counts['failed']} failed, {counts['pending']} not run); {result.computed} runs "
         f"computed, {result.cached} taken from the cache",
     ]
+    if result.signals_file is not None:
+        lines.append(f"- recorded signals: `{result.signals_file.name}`, one row per job and "
+                     "sample (e.g. `pandas.read_parquet(path, filters=[('job', '==', "
+                     f"'{plan.jobs[0].id}')])`)")
     if plan.scales:
         lines.append("- relative magnitudes are % of the baseline's peak signal: " + ", ".join(
             f"{k} {v:.4g}" for k, v in plan.scales.items()))

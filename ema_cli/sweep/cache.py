@@ -1,65 +1,88 @@
-"""The job cache: each finished job's SI metrics (and recorded signals) under its content hash.
+"""The job cache: each finished job's SI metrics (and recorded signals), checked on every read.
 
-Layout of the cache folder (default ``results/.cache/sweep``, shared by every sweep run from
-the same working directory, so an extended sweep reuses the jobs it shares with earlier ones):
+Layout of the cache folder (``ema sweep`` uses ``results/.cache/sweep``, shared by every sweep
+run from the same working directory, so an extended sweep reuses the jobs it shares with
+earlier ones; a library sweep that writes no outputs has no cache unless it is given one):
 
-    jobs.sqlite                      table ``jobs(key PRIMARY KEY, metrics)``: metrics[N_METRICS]
-                                     as float64 bytes, SI, the columns of ``sim.tables.METRICS``
-    signals/<key[:2]>/<key>-d<dec>.npy   signals[n_out, N_SIGNALS] recorded every ``dec`` steps
+    jobs.sqlite       table ``jobs(key PRIMARY KEY, metrics, crc)``: metrics[N_METRICS] as
+                      float64 bytes, SI, the columns of ``sim.tables.METRICS``, and their CRC-32;
+                      table ``signals(key, dec, file, row, n_out, crc)``: the job's signals
+                      recorded every ``dec`` steps are row ``row`` of ``file``, with their CRC-32
+    signals/<kk>/<key>-<random>-d<dec>.npy   signals[n, n_out, N_SIGNALS] of one stored chunk
 
-A job is finished when its metrics row exists. The rows of one chunk are committed in one
-SQLite transaction (all or none), after the chunk's signal files, each written to a temporary
-sibling and renamed into place. One transaction per chunk instead of one file per job keeps the
-cache cheap on slow filesystems (measured: ~0.5 ms per file created, ~10 us per row). Rows
-or files that cannot be read or have the wrong shape count as missing and are recomputed.
+A job is finished when its metrics row exists. A chunk's signals go into one file (written to a
+temporary sibling and renamed into place), then the chunk's rows into both tables in one SQLite
+transaction (all rows or none). One file and one transaction per chunk, not per job, keep the
+cache cheap (measured: ~0.5 ms per file created, ~10 us per row). A file no row refers to any
+more (its jobs were stored again) is deleted.
+
+Every entry is verified before it is served: a metrics blob or a signals row whose CRC-32
+(zlib, ~3 GB/s) differs from the one stored beside it, a truncated, unreadable or missing file,
+a wrong shape. Such an entry is never used: it is recorded in :attr:`JobCache.corrupt` (the
+sweep recomputes the job, which replaces the entry, and reports the count). A row that simply
+is not there (a job never run, or run without recording) is missing, not corrupt.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import secrets
 import sqlite3
-import tempfile
+import zlib
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from ema_cli.errors import EmaError
-from ema_cli.files import RESULTS_ROOT
+from ema_cli.files import RESULTS_ROOT, save_array
 from ema_cli.sim.tables import N_METRICS, N_SIGNALS
 
 DEFAULT_CACHE_DIR = RESULTS_ROOT / ".cache" / "sweep"
 DB_NAME = "jobs.sqlite"
 SQLITE_TIMEOUT_S = 60.0  # wait this long for another sweep's transaction on the same cache [s]
 LOOKUP_BATCH = 500  # keys per SELECT ... IN (...) query (SQLite's host-parameter limit is 999)
+SCHEMA = (
+    "CREATE TABLE IF NOT EXISTS jobs (key TEXT PRIMARY KEY, metrics BLOB NOT NULL, "
+    "crc INTEGER NOT NULL)",
+    "CREATE TABLE IF NOT EXISTS signals (key TEXT NOT NULL, dec INTEGER NOT NULL, "
+    "file TEXT NOT NULL, row INTEGER NOT NULL, n_out INTEGER NOT NULL, crc INTEGER NOT NULL, "
+    "PRIMARY KEY (key, dec))",
+)
+SignalRow = tuple[str, int, int, int]
+"""Where a job's signals are: (file relative to ``signals/``, row, n_out, CRC-32)."""
 
 
-def _save(path: Path, array: np.ndarray) -> None:
-    """np.save to a temporary sibling, then rename into place (atomic on one filesystem)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.save(f, array, allow_pickle=False)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0,
+                  (2, 0): np.lib.format.read_array_header_2_0}
+
+
+def checksum(data: bytes | np.ndarray) -> int:
+    """CRC-32 of a bytes object or of an array's bytes (C order)."""
+    return zlib.crc32(data if isinstance(data, bytes) else np.ascontiguousarray(data))
 
 
 class JobCache:
-    """Finished jobs on disk, keyed by content hash (see the module docstring)."""
+    """Finished jobs on disk, keyed by content hash (see the module docstring).
+
+    ``corrupt`` maps the key of every entry found damaged by this object to what was wrong.
+    """
 
     def __init__(self, root: Path | str | None = None) -> None:
         self.root = Path(root) if root is not None else DEFAULT_CACHE_DIR
+        self.corrupt: dict[str, str] = {}
         try:
             self.root.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(self.root / DB_NAME, timeout=SQLITE_TIMEOUT_S,
                                        check_same_thread=False)
             self._db.execute("PRAGMA synchronous=NORMAL")
-            self._db.execute("CREATE TABLE IF NOT EXISTS jobs "
-                             "(key TEXT PRIMARY KEY, metrics BLOB NOT NULL)")
-            self._db.commit()
+            with self._db:
+                columns = [r[1] for r in self._db.execute("PRAGMA table_info(jobs)")]
+                if columns and "crc" not in columns:  # a cache from before checksums
+                    self._db.execute("DROP TABLE jobs")
+                for statement in SCHEMA:
+                    self._db.execute(statement)
         except OSError as exc:
             raise EmaError(f"cannot create the job cache '{self.root}': {exc.strerror}", 1
                            ) from None
@@ -68,63 +91,148 @@ class JobCache:
                            ) from None
 
     def close(self) -> None:
-        """Close the database (the object can still read signal files)."""
+        """Close the database."""
         self._db.close()
 
-    def signals_path(self, key: str, dec: int) -> Path:
-        """Where a job's signals recorded every ``dec`` steps live."""
-        return self.root / "signals" / key[:2] / f"{key}-d{dec}.npy"
-
-    def lookup(self, keys: Iterable[str]) -> dict[str, np.ndarray]:
-        """Cached metrics[N_METRICS] (SI) of those ``keys`` that are finished."""
-        keys = list(keys)
-        found: dict[str, np.ndarray] = {}
+    def _query(self, sql: str, keys: Sequence[str], *extra: object) -> list[tuple]:
+        """``sql`` (with ``{marks}`` for the keys, then ``extra`` parameters) over all keys."""
+        rows: list[tuple] = []
         try:
             for a in range(0, len(keys), LOOKUP_BATCH):
-                batch = keys[a:a + LOOKUP_BATCH]
-                marks = ",".join("?" * len(batch))
-                for key, blob in self._db.execute(
-                        f"SELECT key, metrics FROM jobs WHERE key IN ({marks})", batch):
-                    if len(blob) == N_METRICS * 8:
-                        found[key] = np.frombuffer(blob, dtype=np.float64).copy()
+                batch = list(keys[a:a + LOOKUP_BATCH])
+                rows += self._db.execute(sql.format(marks=",".join("?" * len(batch))),
+                                         [*batch, *extra]).fetchall()
         except sqlite3.Error as exc:
             raise EmaError(f"the job cache '{self.root / DB_NAME}' cannot be read: {exc}", 1
                            ) from None
+        return rows
+
+    def _bad(self, key: str, what: str) -> None:
+        self.corrupt.setdefault(key, what)
+
+    def lookup(self, keys: Iterable[str]) -> dict[str, np.ndarray]:
+        """Verified metrics[N_METRICS] (SI) of those ``keys`` that are finished."""
+        found: dict[str, np.ndarray] = {}
+        for key, blob, crc in self._query(
+                "SELECT key, metrics, crc FROM jobs WHERE key IN ({marks})", list(keys)):
+            if len(blob) != N_METRICS * 8:
+                self._bad(key, f"metrics row has {len(blob)} bytes, expected {N_METRICS * 8}")
+            elif checksum(blob) != crc:
+                self._bad(key, "metrics row does not match its checksum")
+            else:
+                found[key] = np.frombuffer(blob, dtype=np.float64).copy()
         return found
 
     def load_metrics(self, key: str) -> np.ndarray | None:
-        """metrics[N_METRICS] (SI) of one job, or None if it is not cached."""
+        """Verified metrics[N_METRICS] (SI) of one job, or None if not cached (or corrupt)."""
         return self.lookup([key]).get(key)
 
-    def has_signals(self, key: str, dec: int, n_out: int) -> bool:
-        """True if the job's signals recorded every ``dec`` steps are cached, n_out samples."""
-        sig = self.load_signals(key, dec, mmap=True)
-        return sig is not None and sig.shape == (n_out, N_SIGNALS)
+    def signal_rows(self, keys: Iterable[str], dec: int) -> dict[str, SignalRow]:
+        """Where the signals recorded every ``dec`` steps of those ``keys`` that have them are."""
+        return {key: (file, row, n_out, crc) for key, file, row, n_out, crc in self._query(
+            "SELECT key, file, row, n_out, crc FROM signals WHERE key IN ({marks}) AND dec = ?",
+            list(keys), dec)}
 
-    def load_signals(self, key: str, dec: int, mmap: bool = False) -> np.ndarray | None:
-        """signals[n_out, N_SIGNALS] (SI) recorded every ``dec`` steps, or None."""
+    def load_signals(self, key: str, dec: int) -> np.ndarray | None:
+        """Verified signals[n_out, N_SIGNALS] (SI) recorded every ``dec`` steps, or None."""
+        return self.load_signals_many([key], dec).get(key)
+
+    def load_signals_many(self, keys: Iterable[str], dec: int,
+                          n_out: int | None = None) -> dict[str, np.ndarray]:
+        """Verified signals[n_out, N_SIGNALS] (SI) of those ``keys`` that have them.
+
+        ``n_out`` given: a stored row of another length counts as missing (another duration).
+        """
+        by_file: dict[str, list[tuple[str, int, int, int]]] = {}
+        for key, (file, row, n, crc) in self.signal_rows(keys, dec).items():
+            if n_out is None or n == n_out:
+                by_file.setdefault(file, []).append((key, row, n, crc))
+        found: dict[str, np.ndarray] = {}
+        for file, rows in by_file.items():
+            found.update(self._read_rows(file, rows))
+        return found
+
+    def _read_rows(self, file: str, rows: list[tuple[str, int, int, int]]
+                   ) -> dict[str, np.ndarray]:
+        """Rows of one chunk file, each checked against its CRC-32 (bad ones are recorded)."""
+        path = self.root / "signals" / file
+        out: dict[str, np.ndarray] = {}
         try:
-            s = np.load(self.signals_path(key, dec), allow_pickle=False,
-                        mmap_mode="r" if mmap else None)
-        except (OSError, ValueError):
-            return None
-        return s if s.ndim == 2 and s.shape[1] == N_SIGNALS else None
+            with open(path, "rb") as f:
+                reader = HEADER_READERS.get(np.lib.format.read_magic(f))
+                if reader is None:
+                    raise ValueError("unknown .npy format version")
+                shape, fortran, dtype = reader(f)
+                if (fortran or dtype != np.dtype("<f8") or len(shape) != 3
+                        or shape[2] != N_SIGNALS):
+                    raise ValueError(f"unexpected array {shape} {dtype}")
+                start = f.tell()
+                for key, row, n_out, crc in rows:
+                    if row >= shape[0] or shape[1] != n_out:
+                        self._bad(key, f"signals file {file} has shape {shape}")
+                        continue
+                    buf = np.empty((n_out, N_SIGNALS))
+                    f.seek(start + row * buf.nbytes)
+                    if f.readinto(buf.data) != buf.nbytes:
+                        self._bad(key, f"signals file {file} is truncated")
+                    elif checksum(buf) != crc:
+                        self._bad(key, f"signals row {row} of {file} does not match its checksum")
+                    else:
+                        out[key] = buf
+        except FileNotFoundError:
+            for key, *_ in rows:
+                self._bad(key, f"signals file {file} is missing")
+        except (OSError, ValueError) as exc:
+            for key, *_ in rows:
+                if key not in out:
+                    self._bad(key, f"signals file {file} cannot be read: {exc}")
+        return out
+
+    def has_signals(self, key: str, dec: int, n_out: int) -> bool:
+        """True if the job's signals recorded every ``dec`` steps, n_out samples, are cached
+        and intact."""
+        return key in self.load_signals_many([key], dec, n_out)
 
     def store(self, keys: Sequence[str], metrics: np.ndarray, signals: np.ndarray | None,
               dec: int) -> None:
         """Store finished jobs: metrics[n, N_METRICS], signals[n, n_out, N_SIGNALS] or None.
 
-        Signal files first, then every metrics row in one transaction (all rows or none).
+        The signals file first, then every row in one transaction (all rows or none); files
+        that no row refers to any more are deleted afterwards.
         """
-        if signals is not None and dec > 0:
-            for r, key in enumerate(keys):
-                _save(self.signals_path(key, dec), np.ascontiguousarray(signals[r]))
-        rows = [(key, np.ascontiguousarray(metrics[r], dtype=np.float64).tobytes())
-                for r, key in enumerate(keys)]
+        keys = list(keys)
+        met_rows = []
+        for r, key in enumerate(keys):
+            blob = np.ascontiguousarray(metrics[r], dtype=np.float64).tobytes()
+            met_rows.append((key, blob, checksum(blob)))
+        sig_rows = []
+        new_file: Path | None = None
+        if signals is not None and dec > 0 and keys:
+            signals = np.ascontiguousarray(signals, dtype=np.float64)
+            file = f"{keys[0][:2]}/{keys[0]}-{secrets.token_hex(4)}-d{dec}.npy"
+            new_file = self.root / "signals" / file
+            save_array(new_file, signals)
+            sig_rows = [(key, dec, file, r, signals.shape[1], checksum(signals[r]))
+                        for r, key in enumerate(keys)]
         try:
             with self._db:
-                self._db.executemany("INSERT OR REPLACE INTO jobs (key, metrics) VALUES (?, ?)",
-                                     rows)
-        except sqlite3.Error as exc:
-            raise EmaError(f"the job cache '{self.root / DB_NAME}' cannot be written: {exc}", 1
-                           ) from None
+                old = {f for (f,) in self._query(
+                    "SELECT DISTINCT file FROM signals WHERE key IN ({marks}) AND dec = ?",
+                    keys, dec)} if sig_rows else set()
+                self._db.executemany(
+                    "INSERT OR REPLACE INTO jobs (key, metrics, crc) VALUES (?, ?, ?)", met_rows)
+                self._db.executemany(
+                    "INSERT OR REPLACE INTO signals (key, dec, file, row, n_out, crc) "
+                    "VALUES (?, ?, ?, ?, ?, ?)", sig_rows)
+                used = {f for (f,) in self._query(
+                    "SELECT DISTINCT file FROM signals WHERE file IN ({marks})", sorted(old))}
+        except BaseException as exc:
+            if new_file is not None:
+                new_file.unlink(missing_ok=True)
+            if isinstance(exc, sqlite3.Error):
+                raise EmaError(f"the job cache '{self.root / DB_NAME}' cannot be written: "
+                               f"{exc}", 1) from None
+            raise
+        for file in old - used:  # a failure only costs disk space
+            with contextlib.suppress(OSError):
+                os.unlink(self.root / "signals" / file)

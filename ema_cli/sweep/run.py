@@ -1,15 +1,17 @@
 """The sweep runner: plan, look up the cache, execute what is missing (``compute_sweep``).
 
 ``compute_sweep`` returns a :class:`SweepResult`: the metrics table (one row per job) and
-access to each job's decimated time series. It writes nothing but the job cache; the output
-folder is written by ``report.sweep_report.run_sweep`` (the library entry point of ``ema sweep``
-and of the paper reproduction) through the ``on_start`` / ``on_finish`` hooks.
+access to each job's decimated time series. It writes nothing but the job cache (and only when
+given one); the output folder is written by ``report.sweep_report.run_sweep`` (the library entry
+point of ``ema sweep`` and of the paper reproduction) through the ``on_start`` /
+``on_signals`` / ``on_finish`` hooks.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,7 +21,7 @@ import pandas as pd
 
 from ema_cli.config.schema import StudyConfig
 from ema_cli.errors import EmaError
-from ema_cli.sim.tables import MET, METRICS, N_METRICS, SIGNALS
+from ema_cli.sim.tables import MET, METRICS, N_METRICS, N_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import JobCache
 from ema_cli.sweep.execute import (
     ChunkOutput,
@@ -35,24 +37,37 @@ from ema_cli.sweep.plan import Job, Plan, plan_sweep
 OK, DIVERGED, FAILED, PENDING = "ok", "diverged", "failed", "pending"
 """Job states: finished (ok or diverged), failed (error text in the manifest), not run."""
 PROGRESS_REFRESH_PER_S = 4  # progress bar refresh rate [1/s]
+CACHED_SIGNAL_BATCH_BYTES = 64 * 2**20  # cached signals read (and handed on) at a time [bytes]
+JOB_COLUMN, TIME_COLUMN = "job", "t_s"
+"""The job-id and time columns of a sweep's signals table (``signals.parquet``)."""
+
+OnSignals = Callable[[Sequence[int], Sequence[int], np.ndarray], None]
+"""``on_signals(jobs, rows, signals)``: job ``jobs[i]`` (index) recorded ``signals[rows[i]]``
+(SI, [n_out, N_SIGNALS])."""
 
 
 @dataclass
 class SweepResult:
     """The outcome of a sweep.
 
-    ``metrics``: one row per job — ``job`` (id, also the time-series file name), ``label``,
-    ``status`` (ok | diverged | failed | pending), the swept values in the paper's units (see
-    ``plan.axes`` for the columns), every simulator metric in edge units (``sim.tables``), the
-    content hash ``key`` and the ``error`` text of a failed job. ``folder`` is the output folder
-    (None if nothing was written; the report layer sets it). ``timings`` are wall seconds:
-    plan, lookup, warm, execute, kernel (summed over workers), store, outputs, total.
+    ``metrics``: one row per job — ``job`` (id), ``label``, ``status`` (ok | diverged | failed
+    | pending), the swept values in the paper's units (see ``plan.axes`` for the columns), every
+    simulator metric in edge units (``sim.tables``), the content hash ``key`` and the ``error``
+    text of a failed job. ``folder`` is the output folder and ``signals_file`` the signals table
+    written there (None if nothing was written; the report layer sets them). ``cache`` is the
+    job cache (None: none was used; the recorded signals are then kept in memory).
+    ``cache_corrupt`` counts the cache entries found damaged, not used and recomputed (the
+    warning is in ``warnings``). ``timings`` are wall seconds: plan, lookup, warm, execute,
+    kernel (summed over workers), store (cache writes), signals (the ``on_signals`` hook,
+    i.e. writing signals.parquet as chunks finish; it runs alongside the cache writes),
+    writes (handling finished chunks: both of those, as the sweep waited for them), outputs,
+    total.
     """
 
     plan: Plan
     metrics: pd.DataFrame
     folder: Path | None
-    cache: JobCache
+    cache: JobCache | None
     backend: str
     workers: int
     computed: int
@@ -60,11 +75,19 @@ class SweepResult:
     interrupted: bool = False
     timings: dict[str, float] = field(default_factory=dict)
     figures: list[Path] = field(default_factory=list)
+    signals_file: Path | None = None
+    cache_corrupt: int = 0
+    memory: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
     def jobs(self) -> list[Job]:
         """The jobs, in metrics-table order."""
         return self.plan.jobs
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the user should be told: the plan's warnings and damaged cache entries."""
+        return self.plan.warnings
 
     def counts(self) -> dict[str, int]:
         """Jobs per status."""
@@ -80,24 +103,54 @@ class SweepResult:
         raise KeyError(f"no job {job!r} in this sweep")
 
     def signals(self, job: str | int) -> np.ndarray:
-        """SI signals[n_out, N_SIGNALS] of one job (columns: ``sim.tables.SIGNALS``)."""
+        """SI signals[n_out, N_SIGNALS] of one job (columns: ``sim.tables.SIGNALS``).
+
+        From memory or the job cache (bit for bit what the kernel recorded), else from
+        ``signals_file`` (edge units converted back: equal to within rounding).
+        """
         j = self._job(job)
         if self.plan.dec <= 0:
-            raise EmaError("this sweep recorded no time series (outputs.timeseries is false "
-                           "and no overlay figures were asked for)")
-        sig = self.cache.load_signals(j.key, self.plan.dec)
+            raise EmaError("this sweep recorded no time series (outputs.timeseries and "
+                           "outputs.per_job_csv are false and no overlay figures were asked for)")
+        sig = self.memory.get(j.key)
+        if sig is None and self.cache is not None:
+            sig = self.cache.load_signals(j.key, self.plan.dec)
+        if sig is None and self.signals_file is not None:
+            ts = read_timeseries(self.signals_file, j.id)
+            sig = np.stack([ts[c.edge].to_numpy() / c.factor for c in SIGNALS], axis=1)
         if sig is None:
             raise EmaError(f"job {j.id} ({j.label}) has no recorded time series "
                            f"(status {self.metrics['status'].iloc[j.index]})")
         return sig
 
     def timeseries(self, job: str | int) -> pd.DataFrame:
-        """Decimated time series of one job in edge units, ``t_s`` first (like ema simulate)."""
-        sig = self.signals(job)
-        data = {"t_s": np.arange(sig.shape[0]) * (self.plan.dec * self.plan.dt)}
+        """Decimated time series of one job in edge units, ``t_s`` first (like ema simulate);
+        read from ``signals_file`` once it is written."""
+        j = self._job(job)
+        if self.signals_file is not None:
+            return read_timeseries(self.signals_file, j.id)
+        sig = self.signals(j.index)
+        data = {TIME_COLUMN: np.arange(sig.shape[0]) * (self.plan.dec * self.plan.dt)}
         for k, c in enumerate(SIGNALS):
             data[c.edge] = sig[:, k] * c.factor
         return pd.DataFrame(data)
+
+
+def read_timeseries(path: Path, job_id: str) -> pd.DataFrame:
+    """One job's rows of a signals table (``t_s`` and every signal, edge units), in time order.
+
+    Reads only the row groups whose statistics may hold ``job_id``.
+    """
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path, columns=[TIME_COLUMN, *(c.edge for c in SIGNALS)],
+                              filters=[(JOB_COLUMN, "=", job_id)])
+    except (OSError, ValueError) as exc:  # pyarrow's errors derive from these
+        raise EmaError(f"cannot read the signals table '{path}': {exc}", 1) from None
+    if table.num_rows == 0:
+        raise EmaError(f"the signals table '{path}' has no rows for job {job_id}", 1)
+    return table.to_pandas()
 
 
 def metrics_frame(plan: Plan, metrics: np.ndarray, status: Sequence[str],
@@ -170,6 +223,7 @@ def compute_sweep(
     base_dir: Path | None = None,
     source: str = "config",
     on_start: Callable[[Plan], None] | None = None,
+    on_signals: OnSignals | None = None,
     on_finish: Callable[[SweepResult, bool], None] | None = None,
 ) -> SweepResult:
     """Run every job of a sweep (finished ones from the cache) and return the result.
@@ -182,21 +236,28 @@ def compute_sweep(
     progress   show a progress bar with ETA on stderr
     scheduler  dask scheduler address (default ``cfg.parallel.scheduler``)
     chunk_size jobs per kernel call (default ``cfg.parallel.chunk_size``, else automatic)
-    cache_dir  job cache folder (default ``results/.cache/sweep``)
+    cache_dir  job cache folder; None: no cache (nothing is created on disk, every job is
+               computed and the recorded signals are kept in memory)
     base_dir   folder relative CSV input profiles are looked up in (the config's folder)
     source     name of the config in error messages
     on_start   ``on_start(plan)``: called once the plan, backend and cache are ready, before
                any job runs (the report layer creates the output folder here)
+    on_signals ``on_signals(jobs, rows, signals)`` (see :data:`OnSignals`): called with the
+               recorded signals of every finished job once, cached ones first, then each
+               chunk's as it completes (the report layer streams signals.parquet here)
     on_finish  ``on_finish(result, aborted)``: called when execution ends, also on Ctrl-C or
                an error (``aborted`` True, the result holds the finished jobs) before the
                exception propagates (the report layer writes the outputs here)
 
     Finished jobs are stored in the cache as each chunk completes; on Ctrl-C ``on_finish``
     runs and KeyboardInterrupt is re-raised. A job whose chunk raised is marked failed (error
-    text in the result) and the sweep goes on. Writes nothing but the job cache.
+    text in the result) and the sweep goes on; an exception in ``on_signals`` stops it. Cache
+    entries that fail their checksum are recomputed and reported (``cache_corrupt``, a
+    warning). Writes nothing but the job cache.
     """
     t_start = time.perf_counter()
-    timings: dict[str, float] = {}
+    timings: dict[str, float] = dict.fromkeys(
+        ("lookup", "warm", "execute", "kernel", "store", "signals", "writes"), 0.0)
     plan = plan_sweep(cfg, base_dir, source)
     timings["plan"] = time.perf_counter() - t_start
     workers = resolve_workers(n_jobs if n_jobs is not None else cfg.parallel.n_jobs)
@@ -204,19 +265,22 @@ def compute_sweep(
     scheduler = scheduler or cfg.parallel.scheduler
     if backend == "dask":
         check_dask(scheduler)
-    cache = JobCache(cache_dir)
+    cache = JobCache(cache_dir) if cache_dir is not None else None
     if on_start is not None:
         on_start(plan)
 
-    t0 = time.perf_counter()
     n = len(plan.jobs)
     n_out = plan.n_steps // plan.dec + 1 if plan.dec > 0 else 0
     metrics = np.full((n, N_METRICS), np.nan)
     status = [PENDING] * n
     errors = [""] * n
+    memory: dict[str, np.ndarray] = {}
     by_key: dict[str, list[int]] = {}
     for j in plan.jobs:
         by_key.setdefault(j.key, []).append(j.index)
+    first = {key: idxs[0] for key, idxs in by_key.items()}
+    computed = cached = 0
+    sink_failed = False
 
     def finish(key: str, m: np.ndarray) -> None:
         st = DIVERGED if m[MET["diverged"]] == 1.0 else OK
@@ -224,50 +288,83 @@ def compute_sweep(
             metrics[idx] = m
             status[idx] = st
 
-    found = {} if force else cache.lookup(by_key)
-    pending: list[str] = []
-    for key in by_key:
-        m = found.get(key)
-        if m is not None and (plan.dec <= 0 or cache.has_signals(key, plan.dec, n_out)):
-            finish(key, m)
-        else:
-            pending.append(key)
-    cached = len(by_key) - len(pending)
-    timings["lookup"] = time.perf_counter() - t0
+    def hand_on(keys: Sequence[str], signals: np.ndarray | None) -> None:
+        """Give the signals of finished ``keys`` to ``on_signals`` (every job of each key)."""
+        nonlocal sink_failed
+        if on_signals is None or signals is None or plan.dec <= 0:
+            return
+        ts = time.perf_counter()
+        pairs = [(idx, r) for r, key in enumerate(keys) for idx in by_key[key]]
+        try:
+            on_signals([p[0] for p in pairs], [p[1] for p in pairs], signals)
+        except BaseException:
+            sink_failed = True
+            raise
+        finally:
+            timings["signals"] += time.perf_counter() - ts
 
-    sizes = chunk_sizes(len(pending), plan.n_steps, workers, backend, n_out,
-                        chunk_size or cfg.parallel.chunk_size)
-    bounds = np.cumsum([0, *sizes])
-    chunk_keys = [pending[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-    first = {key: idxs[0] for key, idxs in by_key.items()}
-    chunks = [plan.P([plan.jobs[first[k]] for k in keys]) for keys in chunk_keys]
-    done_chunks: set[int] = set()
-    computed = 0
-    timings.update(warm=0.0, execute=0.0, kernel=0.0, store=0.0)
-    label = f"{cfg.name}: {len(pending)} to run, {cached} cached"
-    bar = _Progress(sum(len(by_key[k]) for k in pending), progress, label)
+    def store(keys: list[str], res: ChunkOutput) -> float:
+        """Store a finished chunk in the cache -> seconds taken."""
+        ts = time.perf_counter()
+        assert cache is not None and res.metrics is not None
+        cache.store(keys, res.metrics, res.signals, plan.dec)
+        return time.perf_counter() - ts
 
     def on_chunk(i: int, res: ChunkOutput) -> None:
+        """A chunk finished: store it in the cache and hand its signals on, concurrently (both
+        spend their time in GIL-free file writes, CRCs and encoders), then record its jobs."""
         nonlocal computed
         ts = time.perf_counter()
         keys = chunk_keys[i]
+        done_chunks.add(i)
+        timings["kernel"] += res.kernel_s
         if res.error is not None or res.metrics is None:
             for key in keys:
                 for idx in by_key[key]:
                     status[idx] = FAILED
                     errors[idx] = res.error or "no result"
         else:
-            cache.store(keys, res.metrics, res.signals, plan.dec)
+            stored = None
+            if cache is None:
+                if res.signals is not None and plan.dec > 0:
+                    memory.update((key, res.signals[r]) for r, key in enumerate(keys))
+            elif pool is not None:
+                stored = pool.submit(store, keys, res)
+            else:
+                timings["store"] += store(keys, res)
+            try:
+                hand_on(keys, res.signals)
+            finally:
+                if stored is not None:
+                    timings["store"] += stored.result()  # waits; re-raises a cache error
             for r, key in enumerate(keys):
                 finish(key, res.metrics[r])
             computed += len(keys)
-        done_chunks.add(i)
-        timings["kernel"] += res.kernel_s
-        timings["store"] += time.perf_counter() - ts
+        timings["writes"] += time.perf_counter() - ts
         bar.advance(sum(len(by_key[k]) for k in keys))
 
+    chunk_keys: list[list[str]] = []
+    done_chunks: set[int] = set()
+    bar = _Progress(0, False, "")
+    pool = (ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
+            if cache is not None and on_signals is not None and plan.dec > 0 else None)
     interrupted = aborted = False
     try:
+        t0 = time.perf_counter()
+        pending = _lookup(cache, by_key, force, plan.dec, n_out, finish, hand_on)
+        pending.sort(key=first.__getitem__)
+        cached = len(by_key) - len(pending)
+        if cache is not None and cache.corrupt:
+            plan.warnings.append(_corrupt_warning(cache))
+        timings["lookup"] = time.perf_counter() - t0 - timings["signals"]
+
+        sizes = chunk_sizes(len(pending), plan.n_steps, workers, backend, n_out,
+                            chunk_size or cfg.parallel.chunk_size)
+        bounds = np.cumsum([0, *sizes])
+        chunk_keys = [pending[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        chunks = [plan.P([plan.jobs[first[k]] for k in keys]) for keys in chunk_keys]
+        label = f"{cfg.name}: {len(pending)} to run, {cached} cached"
+        bar = _Progress(sum(len(by_key[k]) for k in pending), progress, label)
         with bar:
             if chunks and backend != "dask":
                 timings["warm"] = warm_kernel(plan.signal, plan.dt, 1)  # the prange kernel
@@ -278,6 +375,8 @@ def compute_sweep(
             except (KeyboardInterrupt, EmaError):
                 raise
             except Exception as exc:  # a worker died: unfinished chunks are marked failed
+                if sink_failed:  # ... unless writing the outputs failed: that stops the sweep
+                    raise
                 text = f"{type(exc).__name__}: {exc}"
                 for i, keys in enumerate(chunk_keys):
                     if i not in done_chunks:
@@ -292,10 +391,48 @@ def compute_sweep(
         aborted = True
         raise
     finally:
+        if pool is not None:
+            pool.shutdown()
         result = SweepResult(plan, metrics_frame(plan, metrics, status, errors), None, cache,
                              backend, workers, computed=computed, cached=cached,
-                             interrupted=interrupted, timings=timings)
+                             interrupted=interrupted, timings=timings,
+                             cache_corrupt=len(cache.corrupt) if cache is not None else 0,
+                             memory=memory)
         if on_finish is not None:
             on_finish(result, aborted)
         timings["total"] = time.perf_counter() - t_start
     return result
+
+
+def _lookup(cache: JobCache | None, by_key: dict[str, list[int]], force: bool, dec: int,
+            n_out: int, finish: Callable[[str, np.ndarray], None],
+            hand_on: Callable[[Sequence[str], np.ndarray], None]) -> list[str]:
+    """Finish the jobs the cache holds intact (metrics, and signals if ``dec`` > 0), handing
+    their signals on in batches; returns the keys still to compute."""
+    found = {} if force or cache is None else cache.lookup(by_key)
+    pending = [key for key in by_key if key not in found]
+    if dec <= 0:
+        for key, m in found.items():
+            finish(key, m)
+        return pending
+    assert cache is not None or not found
+    keys = list(found)
+    step = max(1, CACHED_SIGNAL_BATCH_BYTES // (n_out * N_SIGNALS * 8))
+    for a in range(0, len(keys), step):
+        batch = keys[a:a + step]
+        sigs = cache.load_signals_many(batch, dec, n_out) if cache is not None else {}
+        ok = [key for key in batch if key in sigs]
+        pending += [key for key in batch if key not in sigs]
+        for key in ok:
+            finish(key, found[key])
+        if ok:
+            hand_on(ok, np.stack([sigs[key] for key in ok]))
+    return pending
+
+
+def _corrupt_warning(cache: JobCache) -> str:
+    """One line: how many damaged cache entries were found (recomputed), with an example."""
+    n = len(cache.corrupt)
+    key, what = next(iter(cache.corrupt.items()))
+    return (f"job cache '{cache.root}': {n} damaged entr{'y' if n == 1 else 'ies'} not used "
+            f"and recomputed (e.g. {key}: {what})")

@@ -59,8 +59,9 @@ def test_deadzone2_config_writes_every_output(tmp_path, monkeypatch):
     assert {"iae_pos_deg_s", "overshoot_pct", "peak_current_a", "key"} <= set(met.columns)
     # a 0.1 deg step: the largest position error is the step itself, at t = 0
     assert (met["max_abs_err_pos_deg"] >= 0.1 - 1e-12).all()
-    for job in met["job"]:
-        ts = pd.read_csv(run / "timeseries" / f"{job}.csv")
+    signals = pd.read_parquet(run / "signals.parquet")
+    assert list(signals["job"].unique()) == list(met["job"]) and not (run / "timeseries").exists()
+    for _, ts in signals.groupby("job", observed=True):
         assert len(ts) == 1001 and ts["t_s"].iloc[-1] == pytest.approx(0.1)  # every 1e-4 s
     for fig in ("errors_deadzone2.png", "metrics_deadzone2.png"):
         assert (run / "figures" / fig).read_bytes()[:8] == PNG_MAGIC
@@ -151,7 +152,7 @@ def test_bad_config_is_one_clear_message(tmp_path, data, needles):
     (["--set", "bogus=1"], "--set bogus: unknown key 'bogus'", 2),
     (["--backend", "mpi"], "--backend must be one of auto, loky, threads, dask", 2),
     (["--backend", "dask"], "the dask backend needs a scheduler address: --scheduler", 2),
-    (["--n-jobs", "0"], "n_jobs must be >= 1", 2),
+    (["--n-jobs", "0"], "--n-jobs (-1: all cores) must be >= 1", 2),
 ])
 def test_bad_options_are_one_clear_message(tmp_path, extra, needle, code):
     r = bad(tmp_path, GOOD, *extra)
@@ -168,8 +169,7 @@ def test_missing_file_and_unwritable_output_folder(tmp_path):
     blocker = tmp_path / "a-file"
     blocker.write_text("x")
     r = invoke("sweep", cfg, "--out", blocker / "run", "--cache-dir", tmp_path / "cache")
-    assert r.exit_code == 1 and f"cannot create output folder '{blocker / 'run'}'" in flat(
-        r.output), r.output
+    assert r.exit_code == 2 and f"'{blocker}' is a file, not a folder" in flat(r.output), r.output
     r = invoke("sweep", cfg, "--out", blocker, "--cache-dir", tmp_path / "cache")
     assert r.exit_code == 2 and "is a file; expected a folder" in flat(r.output)
     assert "Traceback" not in r.output
@@ -194,3 +194,22 @@ def test_dask_not_installed_says_how_to_install(tmp_path, monkeypatch):
     r = bad(tmp_path, GOOD, "--backend", "dask", "--scheduler", "tcp://127.0.0.1:8786")
     assert r.exit_code == 2 and "pip install 'ema-cli[dask]'" in r.output
     assert "Traceback" not in r.output
+
+
+def test_a_damaged_cache_entry_is_recomputed_with_a_warning(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(yaml.safe_dump(GOOD))
+    cache = tmp_path / "cache"
+    r = invoke("sweep", cfg, "--out", tmp_path / "a", "--cache-dir", cache, "--no-progress")
+    assert r.exit_code == 0, r.output
+    with sqlite3.connect(cache / DB_NAME) as db:  # one metrics row overwritten with zeros
+        db.execute("UPDATE jobs SET metrics = zeroblob(length(metrics)) WHERE rowid = 2")
+    r = invoke("sweep", cfg, "--out", tmp_path / "b", "--cache-dir", cache, "--no-progress")
+    assert r.exit_code == 0, r.output
+    text = flat(r.output)
+    assert "warning: job cache" in text and "1 damaged entry not used and recomputed" in text
+    assert "1 runs computed, 2 cached" in text
+    man = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    assert man["cache_corrupt_entries"] == 1 and man["job_counts"]["computed"] == 1
+    a, b = (pd.read_csv(tmp_path / d / "metrics.csv") for d in "ab")
+    pd.testing.assert_frame_equal(a, b)

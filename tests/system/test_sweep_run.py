@@ -65,14 +65,19 @@ def test_sweep_metrics_equal_ema_simulate(tmp_path):
         np.testing.assert_array_equal(table.loc[i, METRIC_COLS].to_numpy(float),
                                       sim.loc[0, METRIC_COLS].to_numpy(float))
         ts_sim = pd.read_csv(out / "timeseries.csv")
-        ts_sweep = pd.read_csv(tmp_path / "sweep" / "timeseries" / f"{res.jobs[i].id}.csv")
-        assert list(ts_sweep.columns) == list(ts_sim.columns)
+        ts_sweep = pd.read_parquet(tmp_path / "sweep" / "signals.parquet",
+                                   filters=[("job", "==", res.jobs[i].id)])
+        assert list(ts_sweep.columns) == ["job", "deadzone2_deg", *ts_sim.columns]
         assert len(ts_sweep) == 101  # 0.1 s every 1e-3 s (the config's), both ends
-        np.testing.assert_array_equal(ts_sweep.to_numpy(), ts_sim.to_numpy())
-        # and bit for bit in memory, against the library's one-run simulate
-        one = simulate(res.jobs[i].params, res.plan.signal, DURATION, 1e-5, None)
+        # the CSV has 9 significant digits, the parquet file every bit
+        np.testing.assert_allclose(ts_sweep[ts_sim.columns].to_numpy(), ts_sim.to_numpy(),
+                                   rtol=1e-8, atol=0)
+        # and bit for bit, against the library's one-run simulate
+        one = simulate(res.jobs[i].params, res.plan.signal, DURATION, 1e-5, 1e-3)
         np.testing.assert_array_equal(res.metrics.loc[i, METRIC_COLS].to_numpy(float),
                                       one.metrics_frame().loc[0, METRIC_COLS].to_numpy(float))
+        np.testing.assert_array_equal(ts_sweep[ts_sim.columns].to_numpy(),
+                                      one.signals_frame().to_numpy())
 
 
 def test_parallel_backends_equal_serial_bit_for_bit(tmp_path):
@@ -116,6 +121,9 @@ def test_interrupted_sweep_resumes_without_recomputing_or_duplicating(tmp_path, 
     partial = pd.read_csv(tmp_path / "run" / "metrics.csv")
     assert list(partial["status"]) == ["ok", "ok", "pending", "pending"]
     assert json.loads((tmp_path / "run" / "manifest.json").read_text())["status"] == "interrupted"
+    # no signals file (nor its temporary sibling) for an interrupted sweep
+    assert not (tmp_path / "run" / "signals.parquet").exists()
+    assert not list((tmp_path / "run").glob(".*.tmp"))
 
     again = CountingKernel()
     monkeypatch.setattr(execute, "simulate_batch", again)
@@ -131,6 +139,8 @@ def test_interrupted_sweep_resumes_without_recomputing_or_duplicating(tmp_path, 
                                   .to_numpy(float))
     man = json.loads((tmp_path / "run" / "manifest.json").read_text())
     assert man["status"] == "complete" and man["job_counts"]["cached"] == 2
+    signals = pd.read_parquet(tmp_path / "run" / "signals.parquet")
+    assert sorted(signals["job"].unique()) == list(table["job"]) and len(signals) == 4 * 101
 
     # --force recomputes everything; a different sweep may not reuse the folder
     forced = CountingKernel()
@@ -140,7 +150,8 @@ def test_interrupted_sweep_resumes_without_recomputing_or_duplicating(tmp_path, 
     other = write_config(tmp_path, name="other")
     r = runner.invoke(app, ["sweep", str(other), "--out", str(tmp_path / "run"),
                             "--cache-dir", str(tmp_path / "cache"), "--no-progress"])
-    assert r.exit_code == 2 and "holds another run" in r.output
+    assert r.exit_code == 2 and "already holds an unfinished `ema sweep` run of other" in " ".join(
+        r.output.split())
 
 
 def test_exception_in_a_chunk_fails_its_jobs_only_and_a_rerun_finishes(tmp_path, monkeypatch):

@@ -1,4 +1,5 @@
-"""The job cache (SQLite rows + signal files) and the chunk planning of the executor."""
+"""The job cache (SQLite rows + chunk signal files, checksummed) and the chunk planning of the
+executor."""
 
 from __future__ import annotations
 
@@ -11,21 +12,38 @@ from ema_cli.sweep.cache import DB_NAME, JobCache
 from ema_cli.sweep.execute import chunk_sizes, resolve_backend, resolve_workers
 
 
-def test_store_then_lookup_round_trips_bit_for_bit(tmp_path):
+def stored(tmp_path, n=3, n_out=11, dec=10):
+    """A cache holding ``n`` jobs (keys k0, k1, ...) with random metrics and signals."""
     cache = JobCache(tmp_path)
     rng = np.random.default_rng(1)
-    m = rng.standard_normal((3, N_METRICS))
+    m = rng.standard_normal((n, N_METRICS))
+    s = rng.standard_normal((n, n_out, N_SIGNALS))
+    keys = [f"k{r}" for r in range(n)]
+    cache.store(keys, m, s, dec=dec)
+    return cache, keys, m, s
+
+
+def signals_file(cache: JobCache, key: str, dec: int = 10):
+    (file, row, n_out, _), = cache.signal_rows([key], dec).values()
+    return cache.root / "signals" / file, row, n_out
+
+
+def test_store_then_lookup_round_trips_bit_for_bit(tmp_path):
+    cache, keys, m, s = stored(tmp_path)
     m[1, 4] = np.nan
-    s = rng.standard_normal((3, 11, N_SIGNALS))
-    cache.store(["a1", "b2", "c3"], m, s, dec=10)
-    found = JobCache(tmp_path).lookup(["a1", "b2", "c3", "zz"])  # a new connection reads it
-    assert sorted(found) == ["a1", "b2", "c3"]
-    for r, k in enumerate(["a1", "b2", "c3"]):
+    cache.store(keys, m, s, dec=10)  # stored again: the first chunk file is deleted
+    found = JobCache(tmp_path).lookup([*keys, "zz"])  # a new connection reads it
+    assert sorted(found) == keys
+    for r, k in enumerate(keys):
         np.testing.assert_array_equal(found[k], m[r])  # NaN == NaN here, bits identical
         np.testing.assert_array_equal(cache.load_signals(k, 10), s[r])
         assert cache.has_signals(k, 10, 11) and not cache.has_signals(k, 10, 12)
-        assert not cache.has_signals(k, 5, 11)  # another decimation is another file
+        assert not cache.has_signals(k, 5, 11)  # another decimation is another entry
+    many = cache.load_signals_many(keys, 10, 11)
+    assert all(np.array_equal(many[k], s[r]) for r, k in enumerate(keys))
+    assert len(list((tmp_path / "signals").rglob("*.npy"))) == 1  # one file per stored chunk
     assert not list(tmp_path.rglob("*.tmp"))  # no temporary files left behind
+    assert cache.corrupt == {}
 
 
 def test_store_replaces_a_row_and_keeps_one_per_key(tmp_path):
@@ -37,11 +55,66 @@ def test_store_replaces_a_row_and_keeps_one_per_key(tmp_path):
     assert n == 1
 
 
-def test_unreadable_signal_file_counts_as_missing(tmp_path):
+def test_a_flipped_byte_in_a_signals_row_is_detected_and_not_served(tmp_path):
+    cache, keys, m, s = stored(tmp_path)
+    path, row, n_out = signals_file(cache, "k1")
+    data = bytearray(path.read_bytes())
+    pos = len(data) - (3 - row) * n_out * N_SIGNALS * 8 + 100  # inside row 1's bytes
+    data[pos] ^= 0x01
+    path.write_bytes(bytes(data))
+    fresh = JobCache(tmp_path)
+    got = fresh.load_signals_many(keys, 10, 11)
+    assert sorted(got) == ["k0", "k2"]  # the other rows of the file are intact and served
+    np.testing.assert_array_equal(got["k2"], s[2])
+    assert list(fresh.corrupt) == ["k1"] and "checksum" in fresh.corrupt["k1"]
+    assert fresh.load_signals("k1", 10) is None and not fresh.has_signals("k1", 10, 11)
+    # storing the job again replaces the damaged entry
+    fresh.store(["k1"], m[1:2], s[1:2], 10)
+    np.testing.assert_array_equal(JobCache(tmp_path).load_signals("k1", 10), s[1])
+
+
+def test_an_edited_metrics_row_is_detected_and_not_served(tmp_path):
+    cache, keys, m, _ = stored(tmp_path)
+    edited = m[0].copy()
+    edited[3] += 1e-9
+    with cache._db:
+        cache._db.execute("UPDATE jobs SET metrics = ? WHERE key = 'k0'", (edited.tobytes(),))
+        cache._db.execute("UPDATE jobs SET metrics = ? WHERE key = 'k2'", (b"short",))
+    fresh = JobCache(tmp_path)
+    found = fresh.lookup(keys)
+    assert sorted(found) == ["k1"]
+    np.testing.assert_array_equal(found["k1"], m[1])
+    assert sorted(fresh.corrupt) == ["k0", "k2"]
+    assert "checksum" in fresh.corrupt["k0"] and "5 bytes" in fresh.corrupt["k2"]
+
+
+def test_a_truncated_or_missing_signals_file_is_detected(tmp_path):
+    cache, keys, _, s = stored(tmp_path)
+    path, _, n_out = signals_file(cache, "k0")
+    row_bytes = n_out * N_SIGNALS * 8
+    path.write_bytes(path.read_bytes()[:-row_bytes // 2])  # half of the last row (k2) cut off
+    fresh = JobCache(tmp_path)
+    got = fresh.load_signals_many(keys, 10)
+    assert sorted(got) == ["k0", "k1"] and np.array_equal(got["k1"], s[1])
+    assert list(fresh.corrupt) == ["k2"] and "truncated" in fresh.corrupt["k2"]
+    path.write_bytes(b"garbage")
+    assert JobCache(tmp_path).load_signals_many(keys, 10) == {}
+    path.unlink()
+    gone = JobCache(tmp_path)
+    assert gone.load_signals("k0", 10) is None and "missing" in gone.corrupt["k0"]
+    assert sorted(gone.lookup(keys)) == keys  # the metrics rows are intact
+
+
+def test_a_cache_from_before_checksums_is_emptied_not_trusted(tmp_path):
+    import sqlite3
+
+    with sqlite3.connect(tmp_path / DB_NAME) as db:
+        db.execute("CREATE TABLE jobs (key TEXT PRIMARY KEY, metrics BLOB NOT NULL)")
+        db.execute("INSERT INTO jobs VALUES ('k', ?)", (np.zeros(N_METRICS).tobytes(),))
     cache = JobCache(tmp_path)
-    cache.store(["k"], np.zeros((1, N_METRICS)), np.zeros((1, 5, N_SIGNALS)), 2)
-    cache.signals_path("k", 2).write_bytes(b"garbage")
-    assert cache.load_signals("k", 2) is None and not cache.has_signals("k", 2, 5)
+    assert cache.lookup(["k"]) == {}
+    cache.store(["k"], np.ones((1, N_METRICS)), None, 0)
+    np.testing.assert_array_equal(cache.load_metrics("k"), np.ones(N_METRICS))
 
 
 def test_cache_in_an_unusable_place_is_a_clear_error(tmp_path):
