@@ -23,7 +23,7 @@ from ema_cli.config.loader import resolve_params
 from ema_cli.errors import EmaError
 from ema_cli.model.params import to_row
 from ema_cli.sim.runner import plan_steps, simulate_batch
-from ema_cli.sim.signals import InputSignal, sample
+from ema_cli.sim.signals import InputSignal, sampler
 
 GRID_POINTS = 12  # magnitudes evaluated per refinement round (one kernel batch)
 MAX_ROUNDS = 12  # refinement rounds at most
@@ -132,7 +132,7 @@ def simulation_evaluator(
     """An ``evaluate(values)`` that simulates one run per magnitude of nonlinearity ``vary``
     (edge units), all in one kernel batch, and returns their metrics in edge units."""
     n_steps, _ = plan_steps(duration, dt, None)
-    ref = sample(signal, dt, n_steps)
+    ref = sampler(signal, dt, n_steps)  # sampled per time chunk by every evaluation
 
     def evaluate(values: np.ndarray) -> pd.DataFrame:
         rows = [to_row(resolve_params(plant, {**nonlinearities, vary: float(v)},

@@ -29,6 +29,18 @@ Numerics
 * Locked motor: ``theta_m, w_m, i, xI`` keep their initial 0 (controller and armature off).
 * A non-finite state or one past the runaway bounds marks the lane diverged: its metrics are NaN
   except ``diverged = 1`` and ``t_end``; its later samples are NaN. Other lanes are unaffected.
+
+Time chunks
+-----------
+An entry point advances steps ``k0 <= k < k1`` of a run of ``n_steps`` steps (``k`` runs to
+``n_steps`` inclusive: the last step only records and accumulates). Everything that must persist
+between calls lives in the caller's state array ``S`` (one work array per chunk of lanes):
+the first call (``k0 == 0``) fills it from ``P``, later calls resume from it, and only the call
+that reaches the end (``k1 == n_steps + 1``) finishes the metrics. The inputs are given for the
+steps of the call only (``ref_pos[:, 2*(k-k0)]`` is the reference at ``t_k``). Every step index
+the numerics use (the trapezoid end weights, the steady-state and oscillation windows, the
+recording instants, the divergence checks) is absolute, so a run cut into any chunks is bit for
+bit the run done in one call. A run done in one call may pass an empty ``S``.
 """
 
 from __future__ import annotations
@@ -129,6 +141,8 @@ _U0 = _A0 + _N_ACC  # inputs: reference at t, t+dt/2, t+dt; its velocity; load p
 _U_R0, _U_R1, _U_R2, _U_RV, _U_L0, _U_L1, _U_L2 = range(_U0, _U0 + 7)
 _REC0 = _U0 + 7  # recorded signals, in tables.SIGNALS order
 _N_ROWS = _REC0 + N_SIGNALS
+N_ROWS = _N_ROWS  # rows of a work array (the state array S of the entry points has this many)
+ALIVE_ROW = _D_ALIVE  # the row of S that is 0 once a lane has diverged
 
 W_RUNAWAY = 1.0e5  # |w_m| above this is a runaway [rad/s] (~1e6 rpm)
 THETA_RUNAWAY = 1.0e4  # |theta_L| above this is a runaway [rad]
@@ -364,12 +378,22 @@ def _advance(W, k, dt, n_steps, in_ss, in_osc, record, fric_chunk, extras):
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
-def _init(W, n_real, step_info, qidx, dt, n_steps):
-    """Fill the derived rows, accumulators and controller memory of every lane of ``W`` (the
-    spare lanes beyond ``n_real`` copy lane 0's parameters) -> (any lane has friction, any lane
-    uses the digital controller, a quantiser or the locked motor)."""
+def _variant(W):
+    """(any lane of ``W`` has friction, any lane uses the digital controller, a quantiser or
+    the locked motor): the kernel variant its steps need."""
     fric_chunk = False
     extras = False
+    for j in range(W.shape[1]):
+        fric_chunk = fric_chunk or W[_FRIC, j] != 0.0
+        extras = extras or (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
+                            or W[_LOCKED, j] != 0.0)
+    return fric_chunk, extras
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _init(W, n_real, step_info, qidx, dt, n_steps):
+    """Fill the derived rows, accumulators and controller memory of every lane of ``W`` (the
+    spare lanes beyond ``n_real`` copy lane 0's parameters) -> :func:`_variant`."""
     for j in range(W.shape[1]):
         jj = j if j < n_real else 0
         for c in range(N_PARAMS):
@@ -398,34 +422,43 @@ def _init(W, n_real, step_info, qidx, dt, n_steps):
         W[_A_T50, j] = _NAN
         W[_A_T90, j] = _NAN
         W[_A_LAST, j] = -1.0
-        fric_chunk = fric_chunk or W[_FRIC, j] != 0.0
-        extras = extras or (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
-                            or W[_LOCKED, j] != 0.0)
-    return fric_chunk, extras
+    return _variant(W)
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
-def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, dec, sig, met):
-    """Integrate the lanes of the work array ``W`` together (the first ``n_real`` are real, the
-    rest padding copies of lane 0) and write their metrics and signals."""
+def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, k0, k1, dec, sig,
+         rows, met):
+    """Advance the lanes of the work array ``W`` together over steps ``k0..k1-1`` (the first
+    ``n_real`` are real, the rest padding copies of lane 0): initialise ``W`` when ``k0`` is 0,
+    record the signals of lane ``j`` into ``sig[rows[j]]`` and, when the run ends here, write its
+    metrics into ``met[rows[j]]``."""
     nl = W.shape[1]
-    fric_chunk, extras = _init(W, n_real, step_info, qidx, dt, n_steps)
+    if k0 == 0:
+        fric_chunk, extras = _init(W, n_real, step_info, qidx, dt, n_steps)
+    else:
+        fric_chunk, extras = _variant(W)
     k_ss = int(np.ceil(SS_FRACTION * n_steps - 1e-9))
     k_osc = int(np.ceil(OSC_FRACTION * n_steps - 1e-9))
-    has_load = load_half.shape[1] > 1
-    countdown = 0  # steps until the next recorded sample
-    for k in range(n_steps + 1):
+    has_load = load_half.shape[1] > 0
+    countdown = (dec - k0 % dec) % dec if dec > 0 else 0  # steps until the next recorded sample
+    n_alive = n_real
+    if k0 > 0:  # resumed: nothing to do once every lane has diverged
+        n_alive = 0
+        for j in range(n_real):
+            n_alive += W[_D_ALIVE, j] != 0.0
+    for k in range(k0, k1 if n_alive > 0 else k0):
         # this step's inputs per lane (lanes may follow different references)
-        nxt = 2 * k + 1 if k < n_steps else 2 * k
+        cur = 2 * (k - k0)
+        nxt = cur + 1 if k < n_steps else cur
         nxt2 = nxt + 1 if k < n_steps else nxt
         for j in range(nl):
             q = qidx[j if j < n_real else 0]
-            W[_U_R0, j] = ref_pos[q, 2 * k]
+            W[_U_R0, j] = ref_pos[q, cur]
             W[_U_R1, j] = ref_pos[q, nxt]
             W[_U_R2, j] = ref_pos[q, nxt2]
-            W[_U_RV, j] = ref_vel[q, k]
+            W[_U_RV, j] = ref_vel[q, k - k0]
             if has_load:
-                W[_U_L0, j] = load_half[q, 2 * k]
+                W[_U_L0, j] = load_half[q, cur]
                 W[_U_L1, j] = load_half[q, nxt]
                 W[_U_L2, j] = load_half[q, nxt2]
         record = dec > 0 and countdown == 0
@@ -445,7 +478,7 @@ def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, d
             for j in range(n_real):
                 dead = k >= W[_D_KEND, j]
                 for s in range(N_SIGNALS):
-                    sig[j, row, s] = _NAN if dead else W[_REC0 + s, j]
+                    sig[rows[j], row, s] = _NAN if dead else W[_REC0 + s, j]
         countdown -= 1
         if k % ALIVE_CHECK == ALIVE_CHECK - 1:
             n_alive = 0
@@ -453,27 +486,31 @@ def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, d
                 n_alive += W[_D_ALIVE, j] != 0.0
             if n_alive == 0:
                 break  # every lane diverged: the rest of the record stays NaN
-    _finish_metrics(W, n_real, dt, n_steps, k_ss, met)
+    if k1 > n_steps:
+        _finish_metrics(W, n_real, dt, n_steps, k_ss, met, rows)
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
-def _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, sig, met, fric, extras):
-    """:func:`_run` for a single lane with its states held in registers (the same arithmetic,
-    :func:`_step`, without the round trips through W)."""
+def _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows, fric,
+             extras):
+    """:func:`_run` for a single lane (row ``o`` of ``sig``) with its states held in registers
+    (the same arithmetic, :func:`_step`, without the round trips through W)."""
     k_ss = int(np.ceil(SS_FRACTION * n_steps - 1e-9))
     k_osc = int(np.ceil(OSC_FRACTION * n_steps - 1e-9))
-    has_load = load_half.shape[1] > 1
+    has_load = load_half.shape[1] > 0
     x, acc, ctl = _load(W, 0)
     lp = _lane_params(W, 0)
-    countdown = 0
-    for k in range(n_steps + 1):
-        nxt = 2 * k + 1 if k < n_steps else 2 * k
+    countdown = (dec - k0 % dec) % dec if dec > 0 else 0
+    # a lane that diverged in an earlier call stays where it stopped (the rest stays NaN)
+    for k in range(k0, k1 if ctl[2] != 0.0 else k0):
+        cur = 2 * (k - k0)
+        nxt = cur + 1 if k < n_steps else cur
         nxt2 = nxt + 1 if k < n_steps else nxt
         if has_load:
-            inp = (ref_pos[q, 2 * k], ref_pos[q, nxt], ref_pos[q, nxt2], ref_vel[q, k],
-                   load_half[q, 2 * k], load_half[q, nxt], load_half[q, nxt2])
+            inp = (ref_pos[q, cur], ref_pos[q, nxt], ref_pos[q, nxt2], ref_vel[q, k - k0],
+                   load_half[q, cur], load_half[q, nxt], load_half[q, nxt2])
         else:
-            inp = (ref_pos[q, 2 * k], ref_pos[q, nxt], ref_pos[q, nxt2], ref_vel[q, k],
+            inp = (ref_pos[q, cur], ref_pos[q, nxt], ref_pos[q, nxt2], ref_vel[q, k - k0],
                    0.0, 0.0, 0.0)
         xn, acc, ctl, out = _step(x, acc, ctl, inp, lp, k, dt, n_steps, k >= k_ss, k >= k_osc,
                                   fric, extras)
@@ -481,64 +518,91 @@ def _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, sig, met, fric
             countdown = dec
             _record(W, 0, x, inp, out, lp[0])
             for s in range(N_SIGNALS):
-                sig[0, k // dec, s] = W[_REC0 + s, 0]
+                sig[o, k // dec, s] = W[_REC0 + s, 0]
         countdown -= 1
         x = xn
         if ctl[2] == 0.0:
             break  # diverged: the rest of the record stays NaN
     _store(W, 0, x, acc, ctl)
-    _finish_metrics(W, 1, dt, n_steps, k_ss, met)
+    if k1 > n_steps:
+        _finish_metrics(W, 1, dt, n_steps, k_ss, met, rows)
 
 
 @njit(cache=True, error_model="numpy")
-def simulate_chunk_nb(P, a, b, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
-                      dec, sig, met):
-    """Integrate rows ``a..b-1`` of ``P[n_cases, N_PARAMS]`` together in one chunk of
-    :data:`LANES` lanes (``b - a <= LANES``; the spare lanes repeat row ``a`` and are dropped).
+def simulate_chunk_nb(P, a, b, S, g, ref_pos, ref_vel, load_half, step_info, ref_index, out_row,
+                      dt, n_steps, k0, k1, dec, sig, met):
+    """Advance rows ``a..b-1`` of ``P[n_cases, N_PARAMS]`` together in one chunk of
+    :data:`LANES` lanes (``b - a <= LANES``; the spare lanes repeat row ``a`` and are dropped)
+    over steps ``k0..k1-1``, their work array kept in ``S[g]`` between calls.
 
-    ref_pos[n_refs, 2*n_steps+1] (half steps, rad), ref_vel[n_refs, n_steps+1] (rad/s),
-    load_half[n_refs, 2*n_steps+1 or 1] (N*m; one column: no profile), step_info[n_refs, 3]
-    (is_step, final value rad, step time s), ref_index[n_cases] the reference of each row.
-    Writes met[n_cases, N_METRICS] rows a..b-1 and, if ``dec`` > 0, their signals every ``dec``
-    steps into sig[n_cases, n_out, N_SIGNALS].
+    ref_pos[n_refs, 2*(k1-k0)+1, or 2*(k1-k0)-1 when k1 == n_steps+1] the reference at the half
+    steps t = j*dt/2, j = 2*k0, 2*k0+1, ... (rad); ref_vel[n_refs, k1-k0] its velocity at the
+    steps (rad/s); load_half[n_refs, like ref_pos, or 0 columns: no profile] (N*m);
+    step_info[n_refs, 3] (is_step, final value rad, step time s); ref_index[n_cases] the
+    reference of each row; out_row[n_cases] the row of sig and met each row of P writes.
+    Writes, if ``dec`` > 0, the signals of the steps k0..k1-1 that are multiples of ``dec`` into
+    sig[n_cases, n_out, N_SIGNALS] and, if k1 == n_steps + 1, the metrics into
+    met[n_cases, N_METRICS].
     """
     W = np.zeros((_N_ROWS, LANES))
-    for j in range(b - a):
-        for c in range(N_PARAMS):
-            W[_P0 + c, j] = P[a + j, c]
-    _run(W, b - a, ref_pos, ref_vel, load_half, step_info, ref_index[a:b], dt, n_steps, dec,
-         sig[a:b], met[a:b])
-
-
-@njit(cache=True, error_model="numpy")
-def simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec,
-                    sig, met):
-    """The same as :func:`simulate_chunk_nb` for the single row ``a``: a chunk of one lane, its
-    states kept in registers (the fastest path for a few configurations; identical results)."""
-    W = np.empty((_N_ROWS, 1))
-    for r in range(_N_ROWS):
-        W[r, 0] = P[a, r - _P0] if _P0 <= r < _P0 + N_PARAMS else 0.0
-    fric, extras = _init(W, 1, step_info, ref_index[a:a + 1], dt, n_steps)
-    q = ref_index[a]
-    one = sig[a:a + 1]
-    m1 = met[a:a + 1]
-    if fric and extras:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, True, True)
-    elif fric:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, True, False)
-    elif extras:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, False, True)
+    if k0 == 0:
+        for j in range(b - a):
+            for c in range(N_PARAMS):
+                W[_P0 + c, j] = P[a + j, c]
     else:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, dec, one, m1, False, False)
+        for r in range(_N_ROWS):
+            for j in range(LANES):
+                W[r, j] = S[g, r, j]
+    _run(W, b - a, ref_pos, ref_vel, load_half, step_info, ref_index[a:b], dt, n_steps, k0, k1,
+         dec, sig, out_row[a:b], met)
+    if k1 <= n_steps:
+        for r in range(_N_ROWS):
+            for j in range(LANES):
+                S[g, r, j] = W[r, j]
 
 
 @njit(cache=True, error_model="numpy")
-def _finish_metrics(W, n_real, dt, n_steps, k_ss, met):
-    """Turn the accumulators of the first ``n_real`` lanes into met[n_real, N_METRICS] (SI)."""
+def simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
+                    n_steps, k0, k1, dec, sig, met):
+    """The same as :func:`simulate_chunk_nb` for the single row ``a`` (its work array kept in
+    ``S[a]``): a chunk of one lane, its states kept in registers (the fastest path for a few
+    configurations; identical results)."""
+    W = np.empty((_N_ROWS, 1))
+    if k0 == 0:
+        for r in range(_N_ROWS):
+            W[r, 0] = P[a, r - _P0] if _P0 <= r < _P0 + N_PARAMS else 0.0
+        fric, extras = _init(W, 1, step_info, ref_index[a:a + 1], dt, n_steps)
+    else:
+        for r in range(_N_ROWS):
+            W[r, 0] = S[a, r, 0]
+        fric, extras = _variant(W)
+    q = ref_index[a]
+    o = out_row[a]
+    rows = out_row[a:a + 1]
+    if fric and extras:
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
+                 True, True)
+    elif fric:
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
+                 True, False)
+    elif extras:
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
+                 False, True)
+    else:
+        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
+                 False, False)
+    if k1 <= n_steps:
+        for r in range(_N_ROWS):
+            S[a, r, 0] = W[r, 0]
+
+
+@njit(cache=True, error_model="numpy")
+def _finish_metrics(W, n_real, dt, n_steps, k_ss, met, rows):
+    """Turn the accumulators of the first ``n_real`` lanes into met[rows[j], :] (SI)."""
     duration = n_steps * dt
     ss_n = n_steps + 1 - k_ss
     for j in range(n_real):
-        out = met[j]
+        out = met[rows[j]]
         if W[_D_ALIVE, j] == 0.0:
             for c in range(N_METRICS):
                 out[c] = _NAN
@@ -580,46 +644,48 @@ def _finish_metrics(W, n_real, dt, n_steps, k_ss, met):
 
 
 @njit(cache=True, error_model="numpy")
-def simulate_rows_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec, sig,
-                     met):
-    """Every row of P alone (:func:`simulate_one_nb`), serially; safe in any thread."""
+def simulate_rows_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
+                     n_steps, k0, k1, dec, sig, met):
+    """Every row of P alone (:func:`simulate_one_nb`, state ``S[n_cases, N_ROWS, 1]``),
+    serially; safe in any thread."""
     for a in range(P.shape[0]):
-        simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
-                        dec, sig, met)
+        simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
+                        n_steps, k0, k1, dec, sig, met)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def simulate_rows_parallel_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
-                              dec, sig, met):
+def simulate_rows_parallel_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row,
+                              dt, n_steps, k0, k1, dec, sig, met):
     """:func:`simulate_rows_nb` with the rows spread over numba threads."""
     for a in prange(P.shape[0]):
-        simulate_one_nb(P, a, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
-                        dec, sig, met)
+        simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
+                        n_steps, k0, k1, dec, sig, met)
 
 
 @njit(cache=True, error_model="numpy")
-def simulate_lanes_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps, dec, sig,
-                      met):
-    """Chunks of :data:`LANES` rows of P advanced together (:func:`simulate_chunk_nb`),
-    serially; safe in any thread."""
+def simulate_lanes_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
+                      n_steps, k0, k1, dec, sig, met):
+    """Chunks of :data:`LANES` rows of P advanced together (:func:`simulate_chunk_nb`, state
+    ``S[n_chunks, N_ROWS, LANES]``), serially; safe in any thread."""
     n = P.shape[0]
     for ch in range((n + LANES - 1) // LANES):
         a = ch * LANES
-        simulate_chunk_nb(P, a, min(a + LANES, n), ref_pos, ref_vel, load_half, step_info,
-                          ref_index, dt, n_steps, dec, sig, met)
+        simulate_chunk_nb(P, a, min(a + LANES, n), S, ch, ref_pos, ref_vel, load_half,
+                          step_info, ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def simulate_lanes_parallel_nb(P, ref_pos, ref_vel, load_half, step_info, ref_index, dt, n_steps,
-                               dec, sig, met):
+def simulate_lanes_parallel_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row,
+                               dt, n_steps, k0, k1, dec, sig, met):
     """:func:`simulate_lanes_nb` with the chunks spread over numba threads."""
     n = P.shape[0]
     for ch in prange((n + LANES - 1) // LANES):
         a = ch * LANES
-        simulate_chunk_nb(P, a, min(a + LANES, n), ref_pos, ref_vel, load_half, step_info,
-                          ref_index, dt, n_steps, dec, sig, met)
+        simulate_chunk_nb(P, a, min(a + LANES, n), S, ch, ref_pos, ref_vel, load_half,
+                          step_info, ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met)
 
 
 KERNELS = {(False, False): simulate_rows_nb, (True, False): simulate_rows_parallel_nb,
            (False, True): simulate_lanes_nb, (True, True): simulate_lanes_parallel_nb}
-"""Entry points by (parallel, in lanes)."""
+"""Entry points by (parallel, in lanes); all take (P, S, ref_pos, ref_vel, load_half, step_info,
+ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met), see :func:`simulate_chunk_nb`."""

@@ -1,14 +1,23 @@
 """Python side of the simulator: validate, allocate, call the kernel, wrap the result.
 
-``simulate_batch`` runs a parameter matrix ``P[n_cases, N_PARAMS]`` against one or more sampled
-references in one kernel call; ``simulate`` is the one-configuration convenience. Results are SI;
+``simulate_batch`` runs a parameter matrix ``P[n_cases, N_PARAMS]`` against one or more
+references; ``simulate`` is the one-configuration convenience. Results are SI;
 ``BatchResult.metrics_frame`` / ``signals_frame`` give tables in edge units (deg, rpm, ...).
+
+Memory is bounded by what is recorded, not by the duration: the kernel is called once per time
+chunk of :data:`TIME_CHUNK` steps, each time with the references sampled for that chunk only,
+and carries its state from call to call (``sim.kernel``, "Time chunks"); a chunked run is bit
+for bit the run done in one call. The recorded signals are checked against a memory budget
+(:func:`record_budget`) before anything is allocated.
 """
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Mapping, Sequence
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,17 +26,22 @@ import pandas as pd
 from ema_cli._numba import CACHE_KEY as KERNEL_KEY
 from ema_cli.errors import EmaError
 from ema_cli.model.params import INDEX, N_PARAMS, equivalent_inertia, to_row
-from ema_cli.sim.kernel import KERNELS, LANES
-from ema_cli.sim.signals import InputSignal, Reference, sample
+from ema_cli.sim.kernel import ALIVE_ROW, KERNELS, LANES, N_ROWS
+from ema_cli.sim.signals import InputSignal, Reference, Sampler, sampler
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 
-__all__ = ["KERNEL_KEY", "BatchResult", "simulate", "simulate_batch"]
+__all__ = ["KERNEL_KEY", "BatchResult", "load_kernel", "simulate", "simulate_batch"]
 
 DEFAULT_DT = 1e-5  # integration step [s] (docs/model.md §6)
 DEFAULT_OUTPUT_INTERVAL = 1e-4  # recorded-signal interval [s]
 RESOLUTION_LIMIT = 0.3  # warn when dt * (fastest rate) exceeds this [-] (RK4 stability ~2.8)
 MAX_STEPS = 2_000_000_000  # refuse absurd step counts
 LANE_MIN_CASES = 4  # per thread: below this many cases, the one-lane path is faster [cases]
+TIME_CHUNK = 2**14  # steps per kernel call; the references are sampled per call [steps]
+"""Measured (experiments/bench.py, "time chunks"): sampling a reference costs the least per step
+at 2**13-2**15 steps (its arrays stay in cache; at 2**16 a step input costs 4x more per step),
+and a call's fixed cost (~30 us) is then ~3 % of a one-configuration kernel call."""
+BUDGET_ENV = "EMA_MAX_RECORD_BYTES"  # overrides the memory budget of one batch's results
 
 
 def plan_steps(duration: float, dt: float, output_interval: float | None) -> tuple[int, int]:
@@ -83,6 +97,9 @@ class BatchResult:
     metrics[n_cases, N_METRICS]          SI metrics (columns: ``tables.METRICS``)
     signals[n_cases, n_out, N_SIGNALS]   SI signals every ``dec`` steps, or None
     t_out[n_out]                         the recorded times [s]
+    kernel_s                             wall time inside the compiled kernel calls [s]
+    load_s                               time spent loading (or compiling) the kernel [s]: 0
+                                         when this process had it loaded already
     """
 
     P: np.ndarray
@@ -92,6 +109,8 @@ class BatchResult:
     dt: float
     n_steps: int
     dec: int
+    kernel_s: float = 0.0
+    load_s: float = 0.0
 
     @property
     def diverged(self) -> np.ndarray:
@@ -138,68 +157,183 @@ def check_sample_times(P: np.ndarray, dt: float) -> None:
                        f"of the integration step dt = {dt:g} s")
 
 
+@functools.cache
+def kernel_signature() -> tuple:
+    """The numba argument types :func:`simulate_batch` calls every kernel entry point with."""
+    from numba import types
+
+    f2 = types.Array(types.float64, 2, "C")
+    f3 = types.Array(types.float64, 3, "C")
+    i1 = types.Array(types.int64, 1, "C")
+    i8, f8 = types.int64, types.float64
+    # P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt, n_steps, k0, k1,
+    # dec, sig, met
+    return (f2, f3, f2, f2, f2, f2, i1, i1, f8, i8, i8, i8, i8, f3, f2)
+
+
+def load_kernel(parallel: bool, lanes: int) -> float:
+    """Load the kernel entry point for (``parallel``, ``lanes``) into this process -> the seconds
+    it took (0 if it was loaded already).
+
+    The dispatcher is asked to compile :func:`kernel_signature`, the exact argument types
+    :func:`simulate_batch` passes: numba takes the machine code from its on-disk cache (or
+    compiles and caches it the first time), without running anything, so later calls with those
+    types do no more than run it.
+    """
+    disp = KERNELS[(bool(parallel), lanes > 1)]
+    if not hasattr(disp, "compile"):  # NUMBA_DISABLE_JIT: plain Python
+        return 0.0
+    sig = kernel_signature()
+    if sig in disp.overloads:
+        return 0.0
+    t0 = time.perf_counter()
+    disp.compile(sig)
+    return time.perf_counter() - t0
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.3g} GiB" if n >= 2**28 else f"{n / 2**20:.3g} MiB"
+
+
+def record_budget() -> tuple[int | None, str]:
+    """The most bytes one batch's results may take -> (bytes or None for no limit, where the
+    number comes from): ``$EMA_MAX_RECORD_BYTES``, else half the available physical memory."""
+    env = os.environ.get(BUDGET_ENV, "").strip()
+    if env:
+        try:
+            value = float(env)
+        except ValueError:
+            value = -1.0
+        if not (math.isfinite(value) and value > 0):
+            raise EmaError(f"{BUDGET_ENV} must be a positive number of bytes, got {env!r}")
+        return int(value), BUDGET_ENV
+    try:
+        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):  # not available on this platform
+        return None, "no limit"
+    return avail // 2, f"half the available memory; {BUDGET_ENV} sets another limit"
+
+
+def check_memory(n_cases: int, n_out: int, n_state: int) -> int:
+    """Refuse a batch whose results (and carried state) would not fit the :func:`record_budget`
+    -> the bytes needed."""
+    record = n_cases * n_out * N_SIGNALS * 8
+    need = record + n_cases * (N_METRICS + N_PARAMS) * 8 + n_state * 8
+    budget, source = record_budget()
+    if budget is not None and need > budget:
+        raise EmaError(
+            f"recording the signals needs {_gib(need)} ({n_cases} run(s) x {n_out} samples x "
+            f"{N_SIGNALS} signals x 8 bytes, with the metrics), more than the {_gib(budget)} "
+            f"allowed ({source}); use a larger simulation.output_interval_s or a shorter "
+            "simulation.duration_s")
+    return need
+
+
 def simulate_batch(
     P: np.ndarray,
-    refs: Sequence[Reference],
+    refs: Sequence[InputSignal | Sampler | Reference],
     ref_index: np.ndarray | None,
     dt: float,
     n_steps: int,
     dec: int = 0,
     parallel: bool = False,
     lanes: int | None = None,
+    progress: Callable[[float], None] | None = None,
 ) -> BatchResult:
     """Run every row of ``P`` (SI parameter matrix) for ``n_steps`` steps of ``dt`` seconds.
 
-    ``refs`` are references sampled for this grid; row c uses ``refs[ref_index[c]]``
-    (``ref_index`` None: all use ``refs[0]``). ``dec`` > 0 records signals every ``dec`` steps.
-    ``parallel`` spreads the chunks over numba threads; ``lanes`` is 1 (each configuration alone)
-    or :data:`kernel.LANES` (chunks in SIMD lanes), default :func:`lanes_for`. Results are
-    bit-identical whatever ``parallel`` and ``lanes`` are.
+    Row c follows ``refs[ref_index[c]]`` (``ref_index`` None: all follow ``refs[0]``): an
+    :class:`InputSignal` (sampled per time chunk), a :class:`Sampler` from ``signals.sampler``
+    for this grid, or a :class:`Reference` sampled for the whole grid. ``dec`` > 0 records
+    signals every ``dec`` steps. ``parallel`` spreads the chunks over numba threads; ``lanes``
+    is 1 (each configuration alone) or :data:`kernel.LANES` (chunks in SIMD lanes), default
+    :func:`lanes_for`. ``progress(fraction)`` is called after each time chunk with the fraction
+    of the steps done. Results are bit-identical whatever ``parallel``, ``lanes`` and
+    :data:`TIME_CHUNK` are. Raises EmaError when the recorded signals would not fit in memory
+    (:func:`check_memory`).
     """
     import numba
 
-    P = np.ascontiguousarray(P, dtype=np.float64)
+    P = np.require(P, dtype=np.float64, requirements=["C", "A", "W"])
     if P.ndim != 2 or P.shape[1] != N_PARAMS:
         raise ValueError(f"P must have shape (n_cases, {N_PARAMS}), got {P.shape}")
     check_sample_times(P, dt)
+    dt, n_steps, dec = float(dt), int(n_steps), int(dec)
     n_cases = P.shape[0]
     if ref_index is None:
         ref_index = np.zeros(n_cases, dtype=np.int64)
-    ref_index = np.ascontiguousarray(ref_index, dtype=np.int64)
-    ref_pos = np.stack([r.pos_half for r in refs])
-    ref_vel = np.stack([r.vel for r in refs])
-    info = np.stack([r.step_info for r in refs])
-    if any(r.load_half is not None for r in refs):
-        load = np.stack([r.load_half if r.load_half is not None else np.zeros_like(r.pos_half)
-                         for r in refs])
-    else:
-        load = np.zeros((len(refs), 1))
-    if ref_pos.shape[1] != 2 * n_steps + 1:
-        raise ValueError("references were sampled for a different number of steps")
-    n_out = n_steps // dec + 1 if dec > 0 else 0
-    sig = np.full((n_cases, n_out, N_SIGNALS), np.nan)
-    met = np.empty((n_cases, N_METRICS))
+    ref_index = np.require(ref_index, dtype=np.int64, requirements=["C", "A", "W"])
+    sources = [sampler(r, dt, n_steps) for r in refs]
+    info = np.ascontiguousarray(np.stack([s.step_info for s in sources]), dtype=np.float64)
+    with_load = any(s.has_load for s in sources)
     if lanes is None:
         lanes = lanes_for(n_cases, numba.get_num_threads() if parallel else 1)
     if lanes not in (1, LANES):
         raise ValueError(f"lanes must be 1 or {LANES}, got {lanes}")
+    chunk = max(int(TIME_CHUNK), 1)
+    n_calls = -(-(n_steps + 1) // chunk)
+    groups = n_cases if lanes == 1 else -(-n_cases // LANES)
+    state_shape = (groups if n_calls > 1 else 0, N_ROWS, lanes)
+    n_out = n_steps // dec + 1 if dec > 0 else 0
+    check_memory(n_cases, n_out, math.prod(state_shape))
+    sig = np.full((n_cases, n_out, N_SIGNALS), np.nan)
+    met = np.empty((n_cases, N_METRICS))
+    state = np.empty(state_shape)
     # group the rows that need the costlier kernel variants (friction; digital controller,
-    # quantisers, locked motor) so that a chunk rarely mixes them; results are put back in order
+    # quantisers, locked motor) so that a chunk rarely mixes them; each row writes its results
+    # straight into its own row of sig and met (out_row)
     extra = ((P[:, INDEX["Ts"]] > 0) | (P[:, INDEX["q_pos"]] > 0) | (P[:, INDEX["q_speed"]] > 0)
              | (P[:, INDEX["locked"]] != 0))
     order = np.argsort(2 * (P[:, INDEX["friction"]] != 0) + extra, kind="stable")
     identity = bool(np.all(order == np.arange(n_cases)))
     Pk = P if identity else np.ascontiguousarray(P[order])
     qk = ref_index if identity else np.ascontiguousarray(ref_index[order])
-    KERNELS[(bool(parallel), lanes > 1)](Pk, ref_pos, ref_vel, load, info, qk, dt, n_steps, dec,
-                                         sig, met)
-    if not identity:
-        inverse = np.empty_like(order)
-        inverse[order] = np.arange(n_cases)
-        met = met[inverse]
-        sig = sig[inverse]
+    out_row = np.ascontiguousarray(order, dtype=np.int64)
+    # lanes of the state that hold a real row (the rest repeat the first row of their chunk)
+    real = (np.arange(groups)[:, None] * lanes + np.arange(lanes)[None, :]) < n_cases
+
+    kernel = KERNELS[(bool(parallel), lanes > 1)]
+    load_s = load_kernel(parallel, lanes)
+    kernel_s = 0.0
+    k0 = 0
+    while k0 <= n_steps:
+        k1 = min(k0 + chunk, n_steps + 1)
+        if n_calls > 1 and k0 > 0 and not np.any(state[:, ALIVE_ROW, :][real] != 0.0):
+            k0 = n_steps + 1  # every row has diverged: only the metrics are left to finish
+            k1 = k0
+        pos, vel, load = _inputs(sources, k0, k1, with_load)
+        t0 = time.perf_counter()
+        kernel(Pk, state, pos, vel, load, info, qk, out_row, dt, n_steps, k0, k1, dec, sig, met)
+        kernel_s += time.perf_counter() - t0
+        if progress is not None:
+            progress(min(k1, n_steps + 1) / (n_steps + 1))
+        k0 = k1
     t_out = np.arange(n_out) * (dec * dt)
-    return BatchResult(P, met, sig if dec > 0 else None, t_out, dt, n_steps, dec)
+    return BatchResult(P, met, sig if dec > 0 else None, t_out, dt, n_steps, dec, kernel_s,
+                       load_s)
+
+
+def _rows(arrays: Sequence[np.ndarray]) -> np.ndarray:
+    """The 1-D ``arrays`` (equal lengths) as the rows of one C-contiguous, writable float64
+    array (a view when there is only one and it qualifies)."""
+    a = arrays[0][None] if len(arrays) == 1 else np.stack(arrays)
+    return np.require(a, dtype=np.float64, requirements=["C", "A", "W"])
+
+
+def _inputs(sources: Sequence, k0: int, k1: int,
+            with_load: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's input arrays for steps k0..k1-1: (ref_pos, ref_vel, load_half), one row per
+    reference (load_half has no columns when no reference has a load profile)."""
+    no_columns = np.zeros((len(sources), 0))
+    if k1 <= k0:  # nothing to sample
+        return no_columns, no_columns, no_columns
+    parts = [s.chunk(k0, k1) for s in sources]
+    pos = _rows([p[0] for p in parts])
+    vel = _rows([p[1] for p in parts])
+    if not with_load:
+        return pos, vel, no_columns
+    load = _rows([p[2] if p[2] is not None else np.zeros(pos.shape[1]) for p in parts])
+    return pos, vel, load
 
 
 def simulate(
@@ -208,10 +342,9 @@ def simulate(
     duration: float,
     dt: float = DEFAULT_DT,
     output_interval: float | None = DEFAULT_OUTPUT_INTERVAL,
+    progress: Callable[[float], None] | None = None,
 ) -> BatchResult:
     """Simulate one resolved SI configuration (see ``model.params.resolve``)."""
     n_steps, dec = plan_steps(duration, dt, output_interval)
-    ref = sample(signal, dt, n_steps)
     P = np.array([to_row(params)])
-    return simulate_batch(P, [ref], None, dt, n_steps, dec)
-
+    return simulate_batch(P, [signal], None, dt, n_steps, dec, progress=progress)

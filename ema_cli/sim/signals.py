@@ -3,6 +3,10 @@
 A reference is sampled at every half step (``t = j*dt/2``, ``j = 0..2*n_steps``) so the RK4
 stages see it exactly; its velocity (for the velocity-error metrics) at every full step.
 All values SI (rad, rad/s, s).
+
+The kernel runs in time chunks: :func:`sampler` prepares a signal for one time grid and its
+:meth:`Sampler.chunk` samples any range of steps on demand, bit for bit the values
+:func:`sample` gives for the whole run at once, so memory does not grow with the duration.
 """
 
 from __future__ import annotations
@@ -98,7 +102,8 @@ def load_profile(path: str | Path, value: str = "theta_ref_deg",
     return t, y * scale
 
 
-def _position(sig: InputSignal, t: np.ndarray, duration: float) -> np.ndarray:
+def _position(sig: InputSignal, t: np.ndarray, duration: float,
+              table: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     tau = t - sig.start
     on = tau >= 0.0
     if sig.kind == "step":
@@ -118,15 +123,21 @@ def _position(sig: InputSignal, t: np.ndarray, duration: float) -> np.ndarray:
         phase = phase + np.where(tau > T, 2 * math.pi * sig.freq_end * (tau - T), 0.0)
         return np.where(on, sig.offset + sig.amplitude * np.sin(phase), 0.0)
     if sig.kind == "csv":
-        if sig.table is None:
-            tt, yy = load_profile(sig.path or "")
-        else:
-            tt, yy = np.asarray(sig.table[0]), np.asarray(sig.table[1])
+        tt, yy = table if table is not None else _profile(sig)
         return np.interp(t, tt, yy)
     raise EmaError(f"unknown input kind '{sig.kind}'; expected one of {KINDS}")
 
 
-def _velocity(sig: InputSignal, t: np.ndarray, pos: np.ndarray, duration: float) -> np.ndarray:
+def _profile(sig: InputSignal) -> tuple[np.ndarray, np.ndarray]:
+    """The (t, theta_ref) table of a ``csv`` signal: its ``table``, else read from ``path``."""
+    if sig.table is None:
+        return load_profile(sig.path or "")
+    return np.asarray(sig.table[0]), np.asarray(sig.table[1])
+
+
+def _velocity(sig: InputSignal, t: np.ndarray, duration: float) -> np.ndarray:
+    """The velocity of a step, ramp, sine or chirp at ``t`` (a CSV profile's comes from
+    finite differences: :meth:`Sampler._csv_velocity`)."""
     tau = t - sig.start
     on = tau >= 0.0
     if sig.kind == "step":
@@ -145,7 +156,7 @@ def _velocity(sig: InputSignal, t: np.ndarray, pos: np.ndarray, duration: float)
         phase = phase + np.where(tau > T, 2 * math.pi * sig.freq_end * (tau - T), 0.0)
         f = np.where(tau > T, sig.freq_end, sig.freq + k * tc)
         return np.where(on, sig.amplitude * 2 * math.pi * f * np.cos(phase), 0.0)
-    return np.gradient(pos, t)  # csv: finite differences of the interpolated profile
+    raise EmaError(f"no closed-form velocity for input kind '{sig.kind}'")
 
 
 @dataclass(frozen=True)
@@ -164,18 +175,135 @@ class Reference:
     load_half: np.ndarray | None = None
 
 
+SCAN_STEPS = 2**16  # steps per block when a whole run's grid is scanned [steps]
+
+
+def _uniform_grid(dt: float, n_steps: int) -> bool:
+    """Whether every step of the grid ``t_k = k*dt`` is exactly ``dt`` in floating point (the
+    test ``np.gradient`` applies to the whole grid), scanned block by block."""
+    for k0 in range(0, n_steps, SCAN_STEPS):
+        t = np.arange(k0, min(k0 + SCAN_STEPS, n_steps) + 1) * dt
+        if not np.all(np.diff(t) == dt):
+            return False
+    return True
+
+
+class Sampler:
+    """A signal prepared for the grid ``t_k = k*dt``, ``k = 0..n_steps``: CSV tables read once,
+    then :meth:`chunk` samples any range of steps.
+
+    ``step_info[3]`` (is_step, final value [rad], step time [s]) for the step metrics;
+    ``has_load`` whether a load-torque profile is given.
+    """
+
+    def __init__(self, sig: InputSignal, dt: float, n_steps: int) -> None:
+        if sig.kind not in KINDS:
+            raise EmaError(f"unknown input kind '{sig.kind}'; expected one of {KINDS}")
+        self.signal = sig
+        self.dt = float(dt)
+        self.n_steps = int(n_steps)
+        self.duration = self.n_steps * self.dt
+        self._table = _profile(sig) if sig.kind == "csv" else None
+        self._load = None
+        if sig.load_table is not None:
+            self._load = (np.asarray(sig.load_table[0]), np.asarray(sig.load_table[1]))
+        # np.gradient (the CSV velocity) takes its formula from the whole grid
+        self._uniform = _uniform_grid(self.dt, self.n_steps) if sig.kind == "csv" else True
+        is_step = sig.kind == "step" and sig.amplitude != 0.0
+        self.step_info = np.array([1.0 if is_step else 0.0, sig.amplitude, sig.start],
+                                  dtype=np.float64)
+
+    @property
+    def has_load(self) -> bool:
+        return self._load is not None
+
+    def chunk(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The inputs of steps ``k0 <= k < k1`` (``0 <= k0 < k1 <= n_steps + 1``) ->
+        (position at the half steps ``j = 2*k0 .. min(2*k1, 2*n_steps)`` [rad], velocity at the
+        steps [rad/s], load torque at the half steps [N*m] or None)."""
+        n, dt = self.n_steps, self.dt
+        th = np.arange(2 * k0, min(2 * k1, 2 * n) + 1) * (0.5 * dt)
+        pos = np.ascontiguousarray(_position(self.signal, th, self.duration, self._table),
+                                   dtype=np.float64)
+        if self.signal.kind == "csv":
+            vel = self._csv_velocity(k0, k1)
+        else:
+            t = np.arange(k0, k1) * dt
+            vel = np.ascontiguousarray(_velocity(self.signal, t, self.duration),
+                                       dtype=np.float64)
+        load = None
+        if self._load is not None:
+            load = np.ascontiguousarray(np.interp(th, *self._load), dtype=np.float64)
+        return pos, vel, load
+
+    def _csv_velocity(self, k0: int, k1: int) -> np.ndarray:
+        """``np.gradient(pos, t)`` over the whole grid (second-order central differences inside,
+        one-sided at both ends), evaluated for steps k0..k1-1 only, with numpy's formulas."""
+        n, dt = self.n_steps, self.dt
+        lo, hi = max(k0 - 1, 0), min(k1, n)  # the steps whose positions enter
+        t = np.arange(lo, hi + 1) * dt
+        f = np.interp(t, *self._table)
+        out = np.empty(k1 - k0)
+        a, b = max(k0, 1), min(k1, n)  # interior steps a..b-1
+        i = np.arange(a, b) - lo  # their index in t and f
+        if b > a:
+            if self._uniform:
+                out[a - k0:b - k0] = (f[i + 1] - f[i - 1]) / (2. * dt)
+            else:
+                dx1 = t[i] - t[i - 1]
+                dx2 = t[i + 1] - t[i]
+                ca = -(dx2) / (dx1 * (dx1 + dx2))
+                cb = (dx2 - dx1) / (dx1 * dx2)
+                cc = dx1 / (dx2 * (dx1 + dx2))
+                out[a - k0:b - k0] = ca * f[i - 1] + cb * f[i] + cc * f[i + 1]
+        if k0 == 0:
+            out[0] = (f[1] - f[0]) / (dt if self._uniform else t[1] - t[0])
+        if k1 == n + 1:
+            out[-1] = (f[-1] - f[-2]) / (dt if self._uniform else t[-1] - t[-2])
+        return out
+
+    def max_abs_position(self) -> float:
+        """max |reference| over every half step of the run [rad], block by block."""
+        peak = 0.0
+        for k0 in range(0, self.n_steps + 1, SCAN_STEPS):
+            pos, _, _ = self.chunk(k0, min(k0 + SCAN_STEPS, self.n_steps + 1))
+            peak = max(peak, float(np.max(np.abs(pos))))
+        return peak
+
+
+class _Presampled:
+    """A :class:`Reference` (sampled for the whole run) behind the :class:`Sampler` interface."""
+
+    def __init__(self, ref: Reference, n_steps: int) -> None:
+        if ref.pos_half.shape != (2 * n_steps + 1,) or ref.vel.shape != (n_steps + 1,):
+            raise ValueError("references were sampled for a different number of steps")
+        self.ref = ref
+        self.n_steps = n_steps
+        self.step_info = ref.step_info
+        self.has_load = ref.load_half is not None
+
+    def chunk(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        j1 = min(2 * k1, 2 * self.n_steps) + 1
+        load = self.ref.load_half
+        return (self.ref.pos_half[2 * k0:j1], self.ref.vel[k0:k1],
+                None if load is None else load[2 * k0:j1])
+
+
+def sampler(source: InputSignal | Reference | Sampler, dt: float,
+            n_steps: int) -> Sampler | _Presampled:
+    """``source`` ready to be sampled in chunks on the grid of ``n_steps`` steps of ``dt``."""
+    if isinstance(source, Sampler):
+        if source.n_steps != n_steps or source.dt != dt:
+            raise ValueError("a Sampler prepared for another time grid")
+        return source
+    if isinstance(source, Reference):
+        return _Presampled(source, n_steps)
+    return Sampler(source, dt, n_steps)
+
+
 def sample(sig: InputSignal, dt: float, n_steps: int) -> Reference:
-    """Sample ``sig`` on the kernel's grid (half steps for position, full steps for velocity)."""
-    duration = n_steps * dt
-    th = np.arange(2 * n_steps + 1) * (0.5 * dt)
-    pos_half = np.ascontiguousarray(_position(sig, th, duration), dtype=np.float64)
-    t = np.arange(n_steps + 1) * dt
-    vel = np.ascontiguousarray(_velocity(sig, t, pos_half[::2], duration), dtype=np.float64)
-    is_step = sig.kind == "step" and sig.amplitude != 0.0
-    info = np.array([1.0 if is_step else 0.0, sig.amplitude, sig.start], dtype=np.float64)
-    load = None
-    if sig.load_table is not None:
-        load = np.ascontiguousarray(
-            np.interp(th, np.asarray(sig.load_table[0]), np.asarray(sig.load_table[1])),
-            dtype=np.float64)
-    return Reference(pos_half, vel, info, load)
+    """Sample ``sig`` on the kernel's grid for the whole run at once (half steps for position,
+    full steps for velocity). The kernel itself samples in time chunks (:func:`sampler`)."""
+    s = Sampler(sig, dt, n_steps)
+    pos, vel, load = s.chunk(0, n_steps + 1)
+    return Reference(pos, vel, s.step_info, load)

@@ -21,7 +21,7 @@ import numpy as np
 
 from ema_cli.errors import EmaError
 from ema_cli.sim.runner import simulate_batch
-from ema_cli.sim.signals import InputSignal, Reference, sample
+from ema_cli.sim.signals import InputSignal, Sampler, sampler
 from ema_cli.sim.tables import N_SIGNALS
 
 BACKENDS = ("auto", "loky", "threads", "dask")
@@ -103,9 +103,10 @@ def chunk_sizes(n: int, n_steps: int, workers: int, backend: str, n_out: int,
 
 
 @functools.lru_cache(maxsize=4)
-def _reference(signal: InputSignal, dt: float, n_steps: int) -> Reference:
-    """The sampled reference, once per process (a worker gets many chunks of one sweep)."""
-    return sample(signal, dt, n_steps)
+def _reference(signal: InputSignal, dt: float, n_steps: int) -> Sampler:
+    """The signal prepared for the grid (a CSV profile read once), once per process: a worker
+    gets many chunks of one sweep. The kernel samples it per time chunk."""
+    return sampler(signal, dt, n_steps)
 
 
 def run_chunk(P: np.ndarray, signal: InputSignal, dt: float, n_steps: int, dec: int,
@@ -125,9 +126,8 @@ def run_chunk(P: np.ndarray, signal: InputSignal, dt: float, n_steps: int, dec: 
         if threads > 0:
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
         ref = _reference(signal, dt, n_steps)
-        t0 = time.perf_counter()
         res = simulate_batch(P, [ref], None, dt, n_steps, dec, parallel=threads > 0)
-        return ChunkOutput(res.metrics, res.signals, time.perf_counter() - t0)
+        return ChunkOutput(res.metrics, res.signals, res.kernel_s)
     except Exception as exc:  # reported per job in the manifest; the sweep goes on
         last = traceback.extract_tb(exc.__traceback__)[-1:]
         where = f" ({last[0].filename}:{last[0].lineno})" if last else ""
@@ -137,14 +137,16 @@ def run_chunk(P: np.ndarray, signal: InputSignal, dt: float, n_steps: int, dec: 
 
 
 def warm_kernel(signal: InputSignal, dt: float, threads: int) -> float:
-    """Compile or load the kernel variant ``threads`` selects, here, before workers start [s]."""
+    """Compile or load the kernel entry points ``threads`` selects (serial or prange; one lane
+    and SIMD lanes), here, before workers start, with a tiny run of each (which also starts
+    numba's thread pool) [s]."""
     from ema_cli.model.params import resolve, to_row
+    from ema_cli.sim.kernel import LANES
 
     t0 = time.perf_counter()
-
     P = np.array([to_row(resolve())])
-    ref = sample(signal, dt, WARM_STEPS)
-    simulate_batch(P, [ref], None, dt, WARM_STEPS, 1, parallel=threads > 0)
+    for lanes in (1, LANES):
+        simulate_batch(P, [signal], None, dt, WARM_STEPS, 1, parallel=threads > 0, lanes=lanes)
     return time.perf_counter() - t0
 
 
