@@ -19,74 +19,37 @@ import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 from ema_cli._numba import CACHE_KEY as KERNEL_KEY
 from ema_cli.errors import EmaError
-from ema_cli.model.params import INDEX, N_PARAMS, equivalent_inertia, to_row
+from ema_cli.model.params import INDEX, N_PARAMS, to_row
+from ema_cli.sim.grid import (  # noqa: F401 (re-exported: the runner's grid API)
+    DEFAULT_DT,
+    DEFAULT_OUTPUT_INTERVAL,
+    MAX_STEPS,
+    RESOLUTION_LIMIT,
+    off_grid,
+    plan_steps,
+    resolution_warnings,
+)
 from ema_cli.sim.kernel import ALIVE_ROW, KERNELS, LANES, N_ROWS
 from ema_cli.sim.signals import InputSignal, Reference, Sampler, sampler
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 
 __all__ = ["KERNEL_KEY", "BatchResult", "load_kernel", "simulate", "simulate_batch"]
 
-DEFAULT_DT = 1e-5  # integration step [s] (docs/model.md §6)
-DEFAULT_OUTPUT_INTERVAL = 1e-4  # recorded-signal interval [s]
-RESOLUTION_LIMIT = 0.3  # warn when dt * (fastest rate) exceeds this [-] (RK4 stability ~2.8)
-MAX_STEPS = 2_000_000_000  # refuse absurd step counts
 LANE_MIN_CASES = 4  # per thread: below this many cases, the one-lane path is faster [cases]
 TIME_CHUNK = 2**14  # steps per kernel call; the references are sampled per call [steps]
 """Measured (experiments/bench.py, "time chunks"): sampling a reference costs the least per step
 at 2**13-2**15 steps (its arrays stay in cache; at 2**16 a step input costs 4x more per step),
 and a call's fixed cost (~30 us) is then ~3 % of a one-configuration kernel call."""
 BUDGET_ENV = "EMA_MAX_RECORD_BYTES"  # overrides the memory budget of one batch's results
-
-
-def plan_steps(duration: float, dt: float, output_interval: float | None) -> tuple[int, int]:
-    """Validate the time grid -> (n_steps, decimation). ``output_interval`` None: no recording."""
-    if not (math.isfinite(dt) and dt > 0):
-        raise EmaError(f"dt must be a positive number of seconds, got {dt}")
-    if not (math.isfinite(duration) and duration > 0):
-        raise EmaError(f"duration must be a positive number of seconds, got {duration}")
-    if dt > duration:
-        raise EmaError(f"dt ({dt} s) must not exceed the duration ({duration} s)")
-    n_steps = round(duration / dt)
-    if abs(n_steps * dt - duration) > 1e-9 * duration:
-        raise EmaError(f"the duration ({duration} s) must be a whole number of steps dt = {dt} s")
-    if n_steps > MAX_STEPS:
-        raise EmaError(f"{n_steps} steps is too many (duration / dt); at most {MAX_STEPS}")
-    if output_interval is None:
-        return n_steps, 0
-    if not (math.isfinite(output_interval) and output_interval > 0):
-        raise EmaError(
-            f"output interval must be a positive number of seconds, got {output_interval}")
-    dec = round(output_interval / dt)
-    if dec < 1 or abs(dec * dt - output_interval) > 1e-9 * output_interval:
-        raise EmaError(
-            f"the output interval ({output_interval} s) must be a whole multiple of dt ({dt} s)"
-        )
-    return n_steps, dec
-
-
-def resolution_warnings(params: Mapping[str, float], dt: float) -> list[str]:
-    """Warnings for dynamics that look under-resolved by the fixed step ``dt`` [s]."""
-    rates = {"electrical pole R/L": params["R"] / params["L"]}
-    jeq = equivalent_inertia(params)
-    rates["transmission mode sqrt(kL/Jeq)"] = math.sqrt(params["kL"] / jeq)
-    rates["transmission damping c/Jeq"] = params["c"] / jeq
-    if params["friction"]:
-        rates["viscous friction sigma2/Jm"] = params["sigma2"] / params["Jm"]
-    out = []
-    for what, rate in rates.items():
-        if rate * dt > RESOLUTION_LIMIT:
-            out.append(
-                f"dt = {dt:g} s may under-resolve the {what} ({rate:.3g} 1/s, "
-                f"rate*dt = {rate * dt:.2f} > {RESOLUTION_LIMIT}); try dt <= "
-                f"{RESOLUTION_LIMIT / rate / 2:.2g} s"
-            )
-    return out
 
 
 @dataclass
@@ -119,6 +82,8 @@ class BatchResult:
 
     def metrics_frame(self) -> pd.DataFrame:
         """Metrics in edge units, one row per case, units in the column names."""
+        import pandas as pd
+
         data = {c.edge: self.metrics[:, j] * c.factor for j, c in enumerate(METRICS)}
         df = pd.DataFrame(data)
         df["diverged"] = df["diverged"].astype(bool)
@@ -126,6 +91,8 @@ class BatchResult:
 
     def signals_frame(self, case: int = 0) -> pd.DataFrame:
         """Recorded signals of one case in edge units, ``t_s`` first."""
+        import pandas as pd
+
         if self.signals is None:
             raise ValueError("signals were not recorded (output interval None)")
         data = {"t_s": self.t_out}
@@ -138,14 +105,6 @@ def lanes_for(n_cases: int, threads: int) -> int:
     """1 (every configuration alone, the fastest for a few) or :data:`kernel.LANES` (chunks
     advanced together in SIMD lanes), whichever is faster for ``n_cases`` on ``threads``."""
     return 1 if n_cases < LANE_MIN_CASES * max(threads, 1) else LANES
-
-
-def off_grid(ts: np.ndarray | float, dt: float) -> np.ndarray:
-    """True where a controller sample time ``ts`` [s] > 0 is not a whole multiple of ``dt``
-    (0 is the continuous controller and always fine)."""
-    ts = np.asarray(ts, dtype=np.float64)
-    n = ts / dt
-    return (ts > 0) & ((n < 1 - 1e-9) | (np.abs(n - np.round(n)) > 1e-9 * np.maximum(n, 1.0)))
 
 
 def check_sample_times(P: np.ndarray, dt: float) -> None:
