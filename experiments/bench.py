@@ -1,5 +1,5 @@
-"""`make bench`: kernel throughput vs the scalar baseline, same-accuracy comparisons with scipy,
-identification, sweeps.
+"""`make bench`: kernel throughput vs the scalar baseline, the cost of running in time chunks,
+same-accuracy comparisons with scipy, identification, sweeps.
 
 Every figure is the median of several repeats measured in this one run (the machines are shared
 and noisy); ratios are between numbers of the same run. Nothing here is asserted: tests check
@@ -9,8 +9,10 @@ correctness, this script measures speed.
 from __future__ import annotations
 
 import importlib.util
+import statistics
 import sys
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +20,7 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 
 from ema_cli.model.params import resolve, to_row
+from ema_cli.sim import runner
 from ema_cli.sim.runner import plan_steps, simulate_batch
 from ema_cli.sim.signals import InputSignal, sample
 from ema_cli.timing import median_time
@@ -48,7 +51,9 @@ def _baseline_kernel():
 def kernel_throughput() -> None:
     """System-steps/s (configurations x RK4 steps per second) of the v2 kernel (one-lane path
     for a batch of 1, SIMD lanes over the cores above) against the scalar baseline (serial for 1,
-    prange over the cores above), 0.1 deg step, 1 s, dt 1e-5 s, metrics only."""
+    prange over the cores above), 0.1 deg step, 1 s, dt 1e-5 s, metrics only. Both get the
+    reference sampled beforehand (the v2 kernel in its time chunks, ``runner.TIME_CHUNK``);
+    the wall time of ``simulate_batch`` is timed."""
     from ema_cli.sim.tables import N_METRICS, N_SIGNALS
 
     base = _baseline_kernel()
@@ -74,6 +79,54 @@ def kernel_throughput() -> None:
             t_old = median_time(lambda P=P: run_base(P), reps)
             print(f"  {label:22s} {size:5d} {size * n / t_new / 1e6:10.1f} "
                   f"{size * n / t_old / 1e6:10.1f} {t_old / t_new:6.2f}")
+
+
+def _chunk_run(P: np.ndarray, sig: InputSignal, n: int, reps: int) -> tuple[float, float]:
+    """Median (wall time of simulate_batch, its kernel_s) [s] for a metrics-only run of ``n``
+    steps of 1e-5 s with the reference sampled per time chunk."""
+    walls, kernels = [], []
+    simulate_batch(P, [sig], None, 1e-5, n, 0, parallel=len(P) > 1)
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        res = simulate_batch(P, [sig], None, 1e-5, n, 0, parallel=len(P) > 1)
+        walls.append(time.perf_counter() - t0)
+        kernels.append(res.kernel_s)
+    return statistics.median(walls), statistics.median(kernels)
+
+
+def time_chunks() -> None:
+    """What running in time chunks costs: the wall time of ``simulate_batch`` given the
+    InputSignal (sampled per chunk) against the time inside the kernel calls (``kernel_s``), for
+    chunks of 2**12 to 2**16 steps; and the peak of numpy's allocations (tracemalloc) for a
+    metrics-only run, 1 s against 20 s (it does not grow with the duration)."""
+    print("\n== time chunks: 1 s, dt 1e-5 s, metrics only; reference sampled per chunk "
+          "[M system-steps/s; share of the wall time outside the kernel]")
+    n, _ = plan_steps(1.0, 1e-5, None)
+    default = runner.TIME_CHUNK
+    print(f"  {'input':6s} {'batch':>5s} " + " ".join(f"{'2**' + str(e):>16s}"
+                                                    for e in (12, 14, 16)))
+    try:
+        for sig in (InputSignal("step", 0.1 * DEG), InputSignal("sine", 0.1 * DEG, freq=5.0)):
+            for size in (1, 1024):
+                P = np.repeat(np.array([to_row(resolve())]), size, axis=0)
+                cells = []
+                for e in (12, 14, 16):
+                    runner.TIME_CHUNK = 2**e
+                    wall, kern = _chunk_run(P, sig, n, REPEATS if size == 1 else 3)
+                    cells.append(f"{size * n / wall / 1e6:8.1f} ({(wall - kern) / wall:4.0%})")
+                print(f"  {sig.kind:6s} {size:5d} " + " ".join(f"{c:>16s}" for c in cells))
+    finally:
+        runner.TIME_CHUNK = default
+    P = np.array([to_row(resolve())])
+    sig = InputSignal("sine", 0.1 * DEG, freq=5.0)
+    for seconds in (1.0, 20.0):
+        n, _ = plan_steps(seconds, 1e-5, None)
+        tracemalloc.start()
+        simulate_batch(P, [sig], None, 1e-5, n, 0)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        print(f"  {seconds:4g} s metrics only: numpy peak {peak / 2**20:6.2f} MiB "
+              f"(the whole reference sampled at once: {(3 * n + 2) * 8 / 2**20:6.1f} MiB)")
 
 
 def _kernel_step_run(p: dict[str, float], step: float, duration: float) -> tuple[float, np.ndarray]:
@@ -203,6 +256,7 @@ def main() -> int:
 
     print(f"python {sys.version.split()[0]}, numpy {np.__version__}; medians of {REPEATS} repeats")
     kernel_throughput()
+    time_chunks()
     same_accuracy_vs_scipy()
     nonlinear_vs_scipy()
     print("\n== identification")
