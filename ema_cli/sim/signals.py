@@ -30,7 +30,8 @@ class InputSignal:
     kind      step | ramp | sine | chirp | csv
     amplitude step size / sine and chirp amplitude [rad]
     start     time the signal starts [s] (before it: 0)
-    rate      ramp slope [rad/s]; the ramp stops at ``amplitude`` if that is > 0
+    rate      ramp slope [rad/s]; the ramp stops at ``|amplitude|`` in the rate's direction
+              (the sign of ``amplitude`` is not used), or never if ``amplitude`` is 0
     freq      sine frequency [Hz]; chirp start frequency
     freq_end  chirp end frequency [Hz] (linear sweep over ``sweep_time``)
     sweep_time chirp sweep duration [s] (0: the run's duration)
@@ -64,7 +65,9 @@ class InputSignal:
         if self.kind == "step":
             return f"{a:g} deg step at t = {self.start:g} s"
         if self.kind == "ramp":
-            return f"ramp {self.rate / DEG:g} deg/s from t = {self.start:g} s"
+            end = (f" to {math.copysign(abs(a), self.rate):g} deg" if self.amplitude != 0
+                   else "")
+            return f"ramp {self.rate / DEG:g} deg/s from t = {self.start:g} s{end}"
         if self.kind == "sine":
             return f"sine {a:g} deg, {self.freq:g} Hz"
         if self.kind == "chirp":
@@ -110,8 +113,8 @@ def _position(sig: InputSignal, t: np.ndarray, duration: float,
         return np.where(on, sig.amplitude, 0.0)
     if sig.kind == "ramp":
         y = np.where(on, sig.rate * tau, 0.0)
-        if sig.amplitude > 0:
-            y = np.clip(y, -sig.amplitude, sig.amplitude)
+        if sig.amplitude != 0:  # stops |amplitude| away from the start, in the rate's direction
+            y = np.clip(y, -abs(sig.amplitude), abs(sig.amplitude))
         return y
     if sig.kind == "sine":
         return np.where(on, sig.offset + sig.amplitude * np.sin(2 * math.pi * sig.freq * tau), 0.0)
@@ -143,7 +146,7 @@ def _velocity(sig: InputSignal, t: np.ndarray, duration: float) -> np.ndarray:
     if sig.kind == "step":
         return np.zeros_like(t)
     if sig.kind == "ramp":
-        moving = on & ((sig.amplitude <= 0) | (np.abs(sig.rate * tau) < sig.amplitude))
+        moving = on & ((sig.amplitude == 0) | (np.abs(sig.rate * tau) < abs(sig.amplitude)))
         return np.where(moving, sig.rate, 0.0)
     if sig.kind == "sine":
         w = 2 * math.pi * sig.freq

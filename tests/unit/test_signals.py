@@ -10,6 +10,7 @@ import pytest
 
 from ema_cli.errors import EmaError
 from ema_cli.sim.signals import InputSignal, Reference, load_profile, sample
+from ema_cli.units import DEG
 
 D = math.pi / 180  # one degree, written out
 
@@ -227,3 +228,14 @@ def test_unknown_kind():
 ])
 def test_describe(sig, text):
     assert sig.describe() == text
+
+
+@pytest.mark.parametrize(("end_deg", "rate_deg_s", "expected_deg"), [
+    (-10.0, -5.0, -10.0), (10.0, 5.0, 10.0), (10.0, -5.0, -10.0), (-10.0, 5.0, 10.0),
+    (0.0, -5.0, -25.0)])
+def test_a_ramp_stops_its_amplitude_away_in_the_rate_direction(end_deg, rate_deg_s, expected_deg):
+    sig = InputSignal("ramp", end_deg * DEG, rate=rate_deg_s * DEG)
+    ref = sample(sig, 0.5, 10)  # 5 s
+    assert ref.pos_half[-1] == pytest.approx(expected_deg * DEG, rel=1e-12)
+    moving = abs(expected_deg) > 24  # no end: still moving at 5 s
+    assert ref.vel[-1] == pytest.approx(rate_deg_s * DEG if moving else 0.0, abs=1e-15)
