@@ -240,8 +240,8 @@ def compute_sweep(
                computed and the recorded signals are kept in memory)
     base_dir   folder relative CSV input profiles are looked up in (the config's folder)
     source     name of the config in error messages
-    on_start   ``on_start(plan)``: called once the plan, backend and cache are ready, before
-               any job runs (the report layer creates the output folder here)
+    on_start   ``on_start(plan)``: called once the plan and backend are ready, before the
+               cache is opened and any job runs (the report layer creates the output folder)
     on_signals ``on_signals(jobs, rows, signals)`` (see :data:`OnSignals`): called with the
                recorded signals of every finished job once, cached ones first, then each
                chunk's as it completes (the report layer streams signals.parquet here)
@@ -265,9 +265,9 @@ def compute_sweep(
     scheduler = scheduler or cfg.parallel.scheduler
     if backend == "dask":
         check_dask(scheduler)
-    cache = JobCache(cache_dir) if cache_dir is not None else None
-    if on_start is not None:
+    if on_start is not None:  # first: a bad output folder is reported before anything is made
         on_start(plan)
+    cache: JobCache | None = None
 
     n = len(plan.jobs)
     n_out = plan.n_steps // plan.dec + 1 if plan.dec > 0 else 0
@@ -346,10 +346,12 @@ def compute_sweep(
     chunk_keys: list[list[str]] = []
     done_chunks: set[int] = set()
     bar = _Progress(0, False, "")
-    pool = (ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
-            if cache is not None and on_signals is not None and plan.dec > 0 else None)
+    pool: ThreadPoolExecutor | None = None
     interrupted = aborted = False
     try:
+        cache = JobCache(cache_dir) if cache_dir is not None else None
+        if cache is not None and on_signals is not None and plan.dec > 0:
+            pool = ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
         t0 = time.perf_counter()
         pending = _lookup(cache, by_key, force, plan.dec, n_out, finish, hand_on)
         pending.sort(key=first.__getitem__)
