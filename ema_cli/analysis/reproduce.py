@@ -23,7 +23,7 @@ from ema_cli.analysis.threshold import ThresholdResult, find_threshold, simulati
 from ema_cli.config.criteria import Criterion
 from ema_cli.config.experiment import ExperimentConfig, ThresholdSpec
 from ema_cli.config.loader import input_signal, load_config, validate
-from ema_cli.config.schema import StudyConfig
+from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.identify.settings import IdentifySettings
 from ema_cli.model.nonlinearities import lookup

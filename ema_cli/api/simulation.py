@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
     from ema_cli.sim.runner import BatchResult
     from ema_cli.sim.signals import InputSignal
 
@@ -203,7 +203,7 @@ def simulate(
     import numpy as np
 
     from ema_cli.config.loader import load_config, resolve_run
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
     from ema_cli.model.params import to_row
     from ema_cli.sim.grid import plan_steps, resolution_warnings
     from ema_cli.sim.runner import simulate_batch

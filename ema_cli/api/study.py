@@ -118,7 +118,7 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
     n_jobs, backend, force, progress   as the command's options
     """
     from ema_cli.config.loader import load_config
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
     from ema_cli.report.sweep_report import run_sweep
 
     pairs = override_pairs(overrides)

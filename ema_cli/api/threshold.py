@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
     from ema_cli.analysis.threshold import ThresholdResult
     from ema_cli.config.criteria import Criterion
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
 
 
 @dataclass
@@ -129,7 +129,7 @@ def threshold(
     from ema_cli.analysis.threshold import find_threshold, simulation_evaluator
     from ema_cli.config.criteria import DEFAULT_RTOL, Criterion
     from ema_cli.config.loader import input_signal, load_config
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
     from ema_cli.model.nonlinearities import lookup
 
     criteria = [Criterion.parse(r) for r in require]

@@ -45,7 +45,7 @@ SetOpt = Annotated[list[str] | None, typer.Option(
 
 def _load(config: Path, set_: list[str] | None) -> tuple[Any, list[tuple[str, str]]]:
     from ema_cli.config.loader import load_config
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
 
     overrides = parse_assignments(set_, "--set")
     return load_config(config, overrides, StudyConfig), overrides

@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from ema_cli.config.schema import KEY_MARK, RunConfig
+from ema_cli.config.run import KEY_MARK, RunConfig
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import combined_updates
 from ema_cli.model.params import INDEX, resolve

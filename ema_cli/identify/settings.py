@@ -21,7 +21,7 @@ from ema_cli.config.base import (
     Seed,
     Strict,
 )
-from ema_cli.config.schema import KEY_MARK
+from ema_cli.config.run import KEY_MARK
 from ema_cli.errors import EmaError
 from ema_cli.identify import ga as ga_mod
 from ema_cli.identify.data import CSV_COLUMNS

@@ -59,7 +59,7 @@ from ema_cli.units import DEG, RPM
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
     from ema_cli.sweep.plan import AxisInfo, Plan
 
 SIGNALS_FILE = "signals.parquet"

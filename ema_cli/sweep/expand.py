@@ -9,7 +9,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 
-from ema_cli.config.schema import StudyConfig, SweepAxis, SweepConfig
+from ema_cli.config.study import StudyConfig, SweepAxis, SweepConfig
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import OFF, lookup
 

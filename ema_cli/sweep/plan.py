@@ -21,7 +21,7 @@ import numpy as np
 
 from ema_cli import __version__
 from ema_cli.config.loader import input_signal, resolve_params
-from ema_cli.config.schema import StudyConfig, SweepAxis
+from ema_cli.config.study import StudyConfig, SweepAxis
 from ema_cli.errors import EmaError
 from ema_cli.hashing import content_hash
 from ema_cli.model.nonlinearities import OFF, lookup

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ema_cli.config.schema import StudyConfig
+from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.sim.tables import MET, METRICS, N_METRICS, N_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import JobCache

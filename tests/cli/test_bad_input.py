@@ -180,7 +180,7 @@ def test_a_fixed_setting_and_an_axis_on_one_placement():
     # the sweep axis replaces the study's fixed setting of the same placement, whatever its
     # name; the baseline removes it
     from ema_cli.config.loader import load_config
-    from ema_cli.config.schema import StudyConfig
+    from ema_cli.config.study import StudyConfig
     from ema_cli.sweep.plan import plan_sweep
     from ema_cli.units import DEG
 

@@ -14,13 +14,14 @@ import pytest
 import yaml
 
 import ema_cli.report.sweep_report as sweep_report
+from ema_cli.config.loader import load_config
+from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.files import AtomicFile
 from ema_cli.report.sweep_report import run_sweep
 from ema_cli.sim.tables import METRICS, N_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import DB_NAME
 from ema_cli.sweep.run import compute_sweep
-from ema_cli.sweep.study import load_study
 
 SIGNAL_COLS = [c.edge for c in SIGNALS]
 METRIC_COLS = [c.edge for c in METRICS]
@@ -42,8 +43,8 @@ def study(tmp_path: Path, **outputs) -> Path:
 
 
 def sweep(tmp_path: Path, out: str = "run", cache: str = "cache", **outputs):
-    return run_sweep(load_study(study(tmp_path, **outputs)), tmp_path / out, n_jobs=1,
-                     progress=False, cache_dir=tmp_path / cache)
+    cfg = load_config(study(tmp_path, **outputs), (), StudyConfig)
+    return run_sweep(cfg, tmp_path / out, n_jobs=1, progress=False, cache_dir=tmp_path / cache)
 
 
 def leftovers(folder: Path) -> list[str]:
@@ -188,7 +189,7 @@ def test_damaged_cache_entries_are_recomputed_and_reported(tmp_path):
 
 def test_no_cache_and_no_files_without_outputs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    cfg = load_study(study(tmp_path))
+    cfg = load_config(study(tmp_path), (), StudyConfig)
     res = run_sweep(cfg, n_jobs=1, progress=False, write=False)
     assert res.cache is None and res.folder is None and res.signals_file is None
     assert sorted(p.name for p in tmp_path.iterdir()) == ["study.yaml"]  # no ./results/.cache

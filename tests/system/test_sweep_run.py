@@ -13,11 +13,12 @@ from typer.testing import CliRunner
 
 import ema_cli.sweep.execute as execute
 from ema_cli.cli.main import app
+from ema_cli.config.loader import load_config
+from ema_cli.config.study import StudyConfig
 from ema_cli.report.sweep_report import run_sweep
 from ema_cli.sim.runner import simulate
 from ema_cli.sim.tables import METRICS
 from ema_cli.sweep.execute import WARM_STEPS
-from ema_cli.sweep.study import load_study
 
 runner = CliRunner()
 METRIC_COLS = [c.edge for c in METRICS]
@@ -44,7 +45,7 @@ def write_config(tmp_path: Path, **changes) -> Path:
 def sweep(tmp_path: Path, out: str, cfg_path: Path | None = None, **kw):
     cfg_path = cfg_path or write_config(tmp_path)
     kw.setdefault("cache_dir", tmp_path / "cache")
-    return run_sweep(load_study(cfg_path), tmp_path / out, progress=False, **kw)
+    return run_sweep(load_config(cfg_path, (), StudyConfig), tmp_path / out, progress=False, **kw)
 
 
 def test_sweep_metrics_equal_ema_simulate(tmp_path):

@@ -19,7 +19,7 @@ import pytest
 from pydantic import BaseModel
 
 from ema_cli.analysis.reproduce import load_experiment
-from ema_cli.config import base, claims, experiment, schema
+from ema_cli.config import base, claims, experiment, run, study
 from ema_cli.config.criteria import Criterion
 from ema_cli.config.experiment import ExperimentConfig
 from ema_cli.config.loader import (
@@ -30,7 +30,8 @@ from ema_cli.config.loader import (
     resolve_params,
     validate,
 )
-from ema_cli.config.schema import RunConfig, StudyConfig
+from ema_cli.config.run import RunConfig
+from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.identify import settings as id_settings
 from ema_cli.identify.settings import IdentifySettings
@@ -229,9 +230,10 @@ def test_figure_needs_an_image_suffix():
 
 
 def test_every_schema_uses_the_one_strict_base():
-    assert schema.Strict is base.Strict and experiment.Strict is base.Strict
+    assert run.Strict is base.Strict and study.Strict is base.Strict
+    assert experiment.Strict is base.Strict
     assert id_settings.Strict is base.Strict and claims.Strict is base.Strict
-    models = [schema.RunConfig, schema.StudyConfig, schema.SweepAxis, schema.Span,
+    models = [run.RunConfig, run.InputConfig, study.StudyConfig, study.SweepAxis, study.Span,
               experiment.ExperimentConfig, experiment.ThresholdSpec, claims.Claim,
               claims.ValueCheck, id_settings.IdentifySettings, id_settings.GASettings,
               id_settings.SyntheticSettings]

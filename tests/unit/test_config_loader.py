@@ -23,7 +23,8 @@ from ema_cli.config.loader import (
     resolve_run,
     validate,
 )
-from ema_cli.config.schema import InputConfig, LoadConfig, RunConfig, StudyConfig
+from ema_cli.config.run import InputConfig, LoadConfig, RunConfig
+from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 
 TOP = list(RunConfig.model_fields)

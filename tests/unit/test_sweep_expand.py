@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ema_cli.config.loader import resolve_params, validate
-from ema_cli.config.schema import StudyConfig
+from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.sweep.expand import count_jobs, expand
 from ema_cli.sweep.plan import plan_sweep, unit_slug

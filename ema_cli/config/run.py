@@ -1,0 +1,284 @@
+"""The schema of one run (``ema simulate``; the part of every study config a simulation reads).
+
+pydantic models, frozen, unknown keys are errors; units in the field names. A run config gives
+the plant (SI overrides of the parameter table), the input signal and simulation grid (paper
+units: degrees, seconds), the nonlinearities fixed for the run (paper names or
+``type@location`` in the units of ``ema locations``) and the load, motor, controller and sensor
+options. ``config.study`` extends it with what a sweep adds.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from ema_cli.config.base import (
+    FiniteFloat,
+    NonNegFloat,
+    PlainName,
+    PositiveFloat,
+    Seed,
+    Strict,
+)
+from ema_cli.errors import EmaError
+from ema_cli.model.nonlinearities import check_distinct, lookup
+from ema_cli.model.params import check_value
+from ema_cli.sim.grid import DEFAULT_DT, DEFAULT_OUTPUT_INTERVAL, off_grid, plan_steps
+from ema_cli.units import RPM
+
+Scalar = float | int | str
+
+
+def _reraise(exc: EmaError, key: str | None = None) -> ValueError:
+    """An EmaError as a pydantic ValueError; ``key`` (a dict key) is folded into the key path."""
+    return ValueError(f"{KEY_MARK}{key}{KEY_MARK}{exc.message}" if key else exc.message)
+
+
+KEY_MARK = "\x00"
+"""Wraps a dict key at the start of a validator message; ``loader.validate`` folds it into the
+key path so errors read ``plant.kL: ...``."""
+
+
+class InputConfig(Strict):
+    """The position reference (load side), in degrees and seconds."""
+
+    kind: Literal["step", "ramp", "sine", "chirp", "csv"] = Field(
+        "step", description="signal shape")
+    amplitude_deg: FiniteFloat = Field(
+        20.0, description="step size, sine/chirp amplitude, or how far a ramp goes (it stops "
+                          "|amplitude_deg| away, in the direction of rate_deg_s; 0: no end) [deg]")
+    start_s: NonNegFloat = Field(
+        0.0, description="time the signal starts [s], before simulation.duration_s")
+    rate_deg_s: FiniteFloat = Field(0.0, description="ramp slope [deg/s]")
+    freq_hz: PositiveFloat = Field(
+        1.0, description="sine frequency / chirp start frequency [Hz]")
+    freq_end_hz: PositiveFloat = Field(1.0, description="chirp end frequency [Hz]")
+    sweep_time_s: NonNegFloat = Field(
+        0.0, description="chirp sweep time [s] (0: whole run)")
+    offset_deg: FiniteFloat = Field(0.0, description="constant added to sine/chirp [deg]")
+    path: str | None = Field(None, description="CSV profile with columns t_s, theta_ref_deg")
+
+    @model_validator(mode="after")
+    def _check(self) -> InputConfig:
+        if self.kind == "csv" and not self.path:
+            raise ValueError("input kind 'csv' needs 'path' (a CSV with t_s, theta_ref_deg)")
+        if self.kind == "ramp" and self.rate_deg_s == 0:
+            raise ValueError("input kind 'ramp' needs a non-zero 'rate_deg_s'")
+        return self
+
+
+class SimulationConfig(Strict):
+    """The fixed-step time grid."""
+
+    duration_s: PositiveFloat = Field(1.0, description="simulated time [s]")
+    dt_s: PositiveFloat = Field(DEFAULT_DT, description="integration step [s]")
+    output_interval_s: PositiveFloat = Field(
+        DEFAULT_OUTPUT_INTERVAL, description="interval of the recorded time series [s]")
+
+    @model_validator(mode="after")
+    def _grid(self) -> SimulationConfig:
+        try:
+            plan_steps(self.duration_s, self.dt_s, self.output_interval_s)
+        except EmaError as exc:
+            raise _reraise(exc) from None
+        return self
+
+
+def _check_plant(values: dict[str, Any]) -> dict[str, Any]:
+    for name, value in values.items():
+        try:
+            check_value(name, value)
+        except EmaError as exc:
+            raise _reraise(exc, name) from None
+    return values
+
+
+def _check_nonlinearities(values: dict[str, Any]) -> dict[str, Any]:
+    for name, value in values.items():
+        try:
+            lookup(name)
+        except EmaError as exc:
+            raise _reraise(exc, name) from None
+        if isinstance(value, str) and value.strip().lower() != "off":
+            try:
+                float(value)
+            except ValueError:
+                raise _reraise(EmaError(f"expects a number or 'off', got {value!r}"),
+                               name) from None
+        if not isinstance(value, str) and (not math.isfinite(float(value)) or value < 0):
+            raise _reraise(EmaError(f"must be a finite number >= 0, got {value!r}"), name)
+    try:
+        check_distinct(values)  # one setting per placement (deadzone2 = deadzone@transmission)
+    except EmaError as exc:
+        raise _reraise(exc) from None
+    return values
+
+
+class LoadConfig(Strict):
+    """The external load on the output (aerodynamic hinge moment, disturbance), load side.
+
+    T_load(t) = torque_nm + profile(t) - spring_nm_per_rad*theta_L, applied to the load inertia,
+    positive along +theta_L.
+    """
+
+    torque_nm: FiniteFloat = Field(
+        0.0, description="constant external torque on the load [N*m]")
+    spring_nm_per_rad: FiniteFloat = Field(
+        0.0, description="hinge-moment gradient k_h: external torque -k_h*theta_L [N*m/rad]")
+    profile: str | None = Field(
+        None, description="CSV with columns t_s, torque_nm added to the torque (interpolated "
+                          "linearly, end values held)")
+
+
+class MotorConfig(Strict):
+    """Motor options."""
+
+    locked: bool = Field(
+        False, description="hold the motor shaft fixed (controller and armature off), for "
+                           "load-deflection tests of the gear train")
+
+
+class ControllerConfig(Strict):
+    """Controller options: continuous (default) or digital with a sample time."""
+
+    sample_time_s: PositiveFloat | None = Field(
+        None, description="digital controller sample time [s], a whole multiple of "
+                                "simulation.dt_s (absent: continuous)")
+
+
+class SensorsConfig(Strict):
+    """Sensor quantisation (absent: ideal sensors)."""
+
+    position_counts_per_rev: PositiveFloat | None = Field(
+        None, description="load-angle encoder resolution [counts/rev]")
+    speed_resolution_rpm: PositiveFloat | None = Field(
+        None, description="motor-speed measurement resolution [rpm]")
+
+
+SECTION_PARAMS = {
+    "load.torque_nm": "T_load", "load.spring_nm_per_rad": "k_h", "motor.locked": "locked",
+    "controller.sample_time_s": "Ts", "sensors.position_counts_per_rev": "q_pos",
+    "sensors.speed_resolution_rpm": "q_speed",
+}
+"""Config settings that set a model parameter (``config path -> parameter``)."""
+
+
+class RunConfig(Strict):
+    """Everything one simulation needs (the part of a study config ``ema simulate`` reads)."""
+
+    name: PlainName = Field(
+        "default", description="study name: letters, digits, _ . - (a folder name), <= 64 chars")
+    description: str = Field("", description="what the study is for")
+    plant: dict[str, Scalar] = Field(
+        default_factory=dict, description="model parameter overrides, SI (see `ema params`)")
+    input: InputConfig = Field(default_factory=InputConfig)
+    simulation: SimulationConfig = Field(default_factory=SimulationConfig)
+    nonlinearities: dict[str, Scalar] = Field(
+        default_factory=dict,
+        description="nonlinearities fixed for the study: paper name or type@location -> "
+                    "magnitude in the units of `ema locations`, or off")
+    friction_reading: Literal["sigma2", "scale"] = Field(
+        "sigma2", description="friction1 magnitude: viscous sigma2 [N*m*s/rad] or Fc scale [N*m]")
+    load: LoadConfig = Field(default_factory=LoadConfig)
+    motor: MotorConfig = Field(default_factory=MotorConfig)
+    controller: ControllerConfig = Field(default_factory=ControllerConfig)
+    sensors: SensorsConfig = Field(default_factory=SensorsConfig)
+    seed: Seed = Field(0, description="seed of everything random (0 .. 2**63-1)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _off_words(cls, data: Any) -> Any:
+        """YAML reads unquoted off/on as booleans: plant values and magnitudes get the words."""
+        if isinstance(data, dict):
+            data = dict(data)
+            for key in ("plant", "nonlinearities"):
+                if isinstance(data.get(key), dict):
+                    data[key] = _bools_to_words(data[key])
+        return data
+
+    def section_params(self) -> dict[str, float]:
+        """The model parameters (SI) set by the load, motor, controller and sensors sections."""
+        out: dict[str, float] = {}
+        if self.load.torque_nm:
+            out["T_load"] = self.load.torque_nm
+        if self.load.spring_nm_per_rad:
+            out["k_h"] = self.load.spring_nm_per_rad
+        if self.motor.locked:
+            out["locked"] = 1.0
+        if self.controller.sample_time_s is not None:
+            out["Ts"] = self.controller.sample_time_s
+        if self.sensors.position_counts_per_rev is not None:
+            out["q_pos"] = 2.0 * math.pi / self.sensors.position_counts_per_rev
+        if self.sensors.speed_resolution_rpm is not None:
+            out["q_speed"] = self.sensors.speed_resolution_rpm * RPM
+        return out
+
+    def describe_options(self) -> str:
+        """The option sections in use, for titles and reports ('' when none)."""
+        parts = []
+        if self.load.torque_nm:
+            parts.append(f"load torque {self.load.torque_nm:g} N*m")
+        if self.load.spring_nm_per_rad:
+            parts.append(f"hinge gradient {self.load.spring_nm_per_rad:g} N*m/rad")
+        if self.load.profile:
+            parts.append(f"load profile {Path(self.load.profile).name}")
+        if self.motor.locked:
+            parts.append("motor locked")
+        if self.controller.sample_time_s is not None:
+            parts.append(f"digital controller Ts {self.controller.sample_time_s * 1e3:g} ms")
+        if self.sensors.position_counts_per_rev is not None:
+            parts.append(f"encoder {self.sensors.position_counts_per_rev:g} counts/rev")
+        if self.sensors.speed_resolution_rpm is not None:
+            parts.append(f"speed resolution {self.sensors.speed_resolution_rpm:g} rpm")
+        return ", ".join(parts)
+
+    def plant_overrides(self) -> dict[str, Any]:
+        """``plant`` (SI) together with the parameters of the option sections."""
+        return {**self.plant, **self.section_params()}
+
+    @model_validator(mode="after")
+    def _sections(self) -> RunConfig:
+        for path, param in SECTION_PARAMS.items():
+            section, key = path.split(".")
+            if param in self.plant and getattr(getattr(self, section), key) not in (None, 0.0,
+                                                                                     False):
+                raise ValueError(f"{path} and plant.{param} set the same parameter; give one")
+        # plant.Ts has passed check_value already (field validators run first)
+        key = "plant.Ts" if "Ts" in self.plant else "controller.sample_time_s"
+        ts = float(check_value("Ts", self.plant_overrides().get("Ts", 0.0)))
+        if off_grid(ts, self.simulation.dt_s):
+            raise ValueError(f"{key} ({ts:g} s) must be a whole multiple of simulation.dt_s "
+                             f"({self.simulation.dt_s:g} s)")
+        return self
+
+    @model_validator(mode="after")
+    def _start(self) -> RunConfig:
+        if self.input.start_s >= self.simulation.duration_s:
+            raise ValueError(f"input.start_s ({self.input.start_s:g} s) must be before the end "
+                             f"of the run, simulation.duration_s ({self.simulation.duration_s:g}"
+                             " s)")
+        return self
+
+    @field_validator("plant")
+    @classmethod
+    def _plant(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _check_plant(v)
+
+    @field_validator("nonlinearities")
+    @classmethod
+    def _nl(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _check_nonlinearities(v)
+
+
+def _bools_to_words(value: Any) -> Any:
+    """YAML 1.1 reads unquoted off/on as booleans: turn them back into the words."""
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    if isinstance(value, list):
+        return [_bools_to_words(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _bools_to_words(v) for k, v in value.items()}
+    return value
