@@ -23,8 +23,8 @@ class Sweep:
     """A finished sweep: ``result`` is ``sweep.run.SweepResult``.
 
     ``metrics``: one row per job (id, label, status, swept values, every metric in edge units).
-    Time series are read from the job cache (the sweep must record them:
-    ``outputs.timeseries`` true, the default).
+    Time series are there when the sweep records them (``outputs.timeseries`` true, the
+    default).
     """
 
     result: SweepResult
@@ -111,9 +111,9 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
           backend: str | None = None, force: bool = False, progress: bool = False,
           cache_dir: str | Path | None = None) -> Sweep:
     """Run every job of a study config, as ``ema sweep CONFIG --set ...`` does, without
-    writing an output folder (``.save()`` does). Jobs are cached in ``cache_dir`` if given
-    (then finished jobs are reused); otherwise in a temporary cache that lives as long as the
-    result.
+    writing an output folder (``.save()`` does). With ``cache_dir`` the jobs are cached there
+    (finished ones are reused by later calls); without it nothing is written to disk and the
+    recorded signals are kept in memory with the result.
 
     n_jobs, backend, force, progress   as the command's options
     """
