@@ -10,7 +10,6 @@ import datetime as _dt
 import json
 import os
 import platform
-import subprocess
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -65,13 +64,42 @@ def write_figure(path: Path, fig: Any, dpi: int = 120) -> None:
 
 
 def git_commit() -> str | None:
-    """The current git commit of the working directory, when available."""
+    """The git commit checked out in the working folder (or a parent), when there is one.
+
+    Read from ``.git`` directly (HEAD, the ref it names, packed-refs): no subprocess."""
+    here = Path.cwd().resolve()
+    for folder in (here, *here.parents):
+        git = folder / ".git"
+        if git.is_file():  # a worktree or submodule: "gitdir: <path>"
+            text = git.read_text(encoding="utf-8", errors="replace").strip()
+            if text.startswith("gitdir:"):
+                git = (folder / text.removeprefix("gitdir:").strip()).resolve()
+        if git.is_dir():
+            return _read_head(git)
+    return None
+
+
+def _read_head(git: Path) -> str | None:
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                             timeout=5, check=False)
-    except (OSError, subprocess.SubprocessError):
+        head = (git / "HEAD").read_text(encoding="utf-8").strip()
+        if not head.startswith("ref:"):
+            return head or None
+        ref = head.removeprefix("ref:").strip()
+        common = git
+        if (git / "commondir").is_file():
+            common = (git / (git / "commondir").read_text(encoding="utf-8").strip()).resolve()
+        for base in (git, common):
+            if (base / ref).is_file():
+                return (base / ref).read_text(encoding="utf-8").strip() or None
+        packed = common / "packed-refs"
+        if packed.is_file():
+            for line in packed.read_text(encoding="utf-8").splitlines():
+                parts = line.split()
+                if len(parts) == 2 and parts[1] == ref:
+                    return parts[0]
+    except OSError:
         return None
-    return out.stdout.strip() or None if out.returncode == 0 else None
+    return None
 
 
 CACHE_NAME = ".cache"

@@ -304,3 +304,28 @@ def test_write_json_turns_numpy_nan_into_null(tmp_path, data):
     write_json(tmp_path / "m.json", data)
     back = json.loads((tmp_path / "m.json").read_text())
     assert None in (back["x"] if isinstance(back["x"], list) else [back["x"]])
+
+
+def test_git_commit_read_from_files_matches_git(tmp_path, monkeypatch):
+    import shutil
+    import subprocess
+
+    root = Path(__file__).resolve().parents[2]
+    if shutil.which("git") and (root / ".git").exists():
+        monkeypatch.chdir(root)
+        head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                              check=True).stdout.strip()
+        assert rundir.git_commit() == head
+    # a packed ref, a detached HEAD, no repository at all
+    git = tmp_path / "repo" / ".git"
+    (git / "refs" / "heads").mkdir(parents=True)
+    (git / "HEAD").write_text("ref: refs/heads/main\n")
+    (git / "packed-refs").write_text("# pack-refs\n" + "a" * 40 + " refs/heads/main\n")
+    (tmp_path / "repo" / "sub").mkdir()
+    monkeypatch.chdir(tmp_path / "repo" / "sub")
+    assert rundir.git_commit() == "a" * 40
+    (git / "HEAD").write_text("b" * 40 + "\n")
+    assert rundir.git_commit() == "b" * 40
+    (tmp_path / "norepo").mkdir()
+    monkeypatch.chdir(tmp_path / "norepo")
+    assert rundir.git_commit() is None or (Path("/") / ".git").exists()
