@@ -7,8 +7,10 @@ Times, as medians over repeats of fresh processes on this machine:
 - ``ema simulate`` (the 1 s default run, compiled kernel already cached, every output written)
                                                   goal < 1.5 s
 
-and the breakdown of ``ema simulate`` from its manifest (``timings_s``): imports, config,
-kernel load (numba cache), simulation (the kernel alone), CSV, figure; "rest" is interpreter
+and the breakdown of ``ema simulate`` from its manifest (``timings_s``): imports (numpy, numba,
+the config schema; matplotlib is imported meanwhile by the forked figure worker,
+``report/figure_worker.py``), config, kernel load (numba cache), simulation (the kernel alone),
+CSV, figure (drawn and written by the worker while the CSVs are written); "rest" is interpreter
 start-up, typer and what is not in a named part. The kernel cache is warmed by one untimed run
 first (the goal is for a cached kernel; a first run after an edit of the model compiles).
 

@@ -128,10 +128,11 @@ class Simulation:
 
         return tracking_figure(self.table(), self.title)
 
-    def save(self, folder: str | Path | None = None) -> Path:
+    def save(self, folder: str | Path | None = None, worker: Any = None) -> Path:
         """Write the run's folder as ``ema simulate`` does (timeseries.csv, metrics.csv,
         tracking.png, config.resolved.yaml, manifest.json) -> the folder. ``folder`` None: a new
-        folder under ``results/<name>/``; a given folder must be new or empty."""
+        folder under ``results/<name>/``; a given folder must be new or empty. ``worker``: a
+        ``report.figure_worker.FigureWorker`` to draw the figure in (the CLI's start-up path)."""
         import yaml
 
         from ema_cli.hashing import content_hash
@@ -143,10 +144,13 @@ class Simulation:
                                 content_hash({"cfg": cfg_json}, 16),
                                 Path(folder) if folder is not None else None)
         timings = dict(self.timings)
-        t0 = time.perf_counter()
-        fig = self.plot() if self.batch.signals is not None else None
-        timings["figure_draw"] = time.perf_counter() - t0
         table = self.table() if self.batch.signals is not None else None
+        if worker is not None:
+            fig: Any = (worker, self.title)
+        else:
+            t0 = time.perf_counter()
+            fig = self.plot() if self.batch.signals is not None else None
+            timings["figure_draw"] = time.perf_counter() - t0
         write_simulation(out, yaml.safe_dump(cfg_json, sort_keys=False), table, self.summary,
                          fig, self.manifest_fields(), timings)
         finish_output(out)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -88,30 +88,19 @@ def simulate_cmd(
 ) -> None:
     """Simulate one configuration and write timeseries.csv, metrics.csv, manifest.json and
     tracking.png."""
-    import importlib
     import time
 
+    from ema_cli.report import figure_worker
+
     t_start = time.perf_counter()
-    for module in HEAVY_MODULES:  # imported here, timed as one part of the run
-        importlib.import_module(module)
-    t_imports = time.perf_counter() - t_start
-    check_number(step, "--step")
-    check_number(duration, "--duration", low=0.0, low_open=True)
-    check_number(dt, "--dt", low=0.0, low_open=True)
-    nl_items = parse_assignments(nl, "--nl")
-    check_nl_options(nl_items)
-    overrides = parse_assignments(set_, "--set")
-    from ema_cli.report.rundir import check_output
-
-    check_output(out, "simulate")
-    from ema_cli.api.simulation import simulate
-
-    run = simulate(config, overrides, nl=dict(nl_items), step_deg=step, duration_s=duration,
-                   dt_s=dt)
-    run.timings["imports"] = t_imports
-    for w in run.warnings:
-        err_console.print(f"[yellow]warning:[/] {w}")
-    folder = run.save(out)
+    # the figure is drawn in a forked child that imports matplotlib meanwhile (None: in-process)
+    worker = figure_worker.start()
+    try:
+        folder, run, t_imports = _simulate(config, step, duration, dt, nl, set_, out, worker)
+    except BaseException:
+        if worker is not None:
+            worker.cancel()
+        raise
     row = run.summary
     console.print(metrics_table(row, run.title))
     if run.diverged:
@@ -120,3 +109,33 @@ def simulate_cmd(
     kernel = run.timings["simulation"]
     console.print(f"{run.batch.n_steps:,} steps in {kernel * 1e3:.1f} ms "
                   f"(total {time.perf_counter() - t_start:.2f} s) -> {folder}")
+
+
+def _simulate(config: Path | None, step: float | None, duration: float | None,
+              dt: float | None, nl: list[str] | None, set_: list[str] | None, out: Path | None,
+              worker: Any) -> tuple[Path, Any, float]:
+    import importlib
+    import time
+
+    check_number(step, "--step")
+    check_number(duration, "--duration", low=0.0, low_open=True)
+    check_number(dt, "--dt", low=0.0, low_open=True)
+    nl_items = parse_assignments(nl, "--nl")
+    overrides = parse_assignments(set_, "--set")
+    from ema_cli.report.rundir import check_output
+
+    check_output(out, "simulate")
+    t_start = time.perf_counter()
+    for module in HEAVY_MODULES:  # imported here, timed as one part of the run
+        if worker is None or "figures" not in module:  # the worker imports matplotlib
+            importlib.import_module(module)
+    t_imports = time.perf_counter() - t_start
+    check_nl_options(nl_items)
+    from ema_cli.api.simulation import simulate
+
+    run = simulate(config, overrides, nl=dict(nl_items), step_deg=step, duration_s=duration,
+                   dt_s=dt)
+    run.timings["imports"] = t_imports
+    for w in run.warnings:
+        err_console.print(f"[yellow]warning:[/] {w}")
+    return run.save(out, worker=worker), run, t_imports

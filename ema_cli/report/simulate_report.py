@@ -36,13 +36,24 @@ def write_simulation(
     """Write the folder (see the module docstring) -> names written.
 
     ``table``: edge-unit columns of the recorded signals (None: nothing recorded);
-    ``metrics``: one value per edge-unit metric column; ``figure``: a Figure or None;
-    ``timings`` (if given) gains ``csv`` and ``figure`` [s] before the manifest is written.
+    ``metrics``: one value per edge-unit metric column; ``figure``: a Figure, a
+    ``(FigureWorker, title)`` pair (the figure is drawn in the worker's process while the CSVs
+    are written here), or None; ``timings`` (if given) gains ``csv`` and ``figure`` [s] before
+    the manifest is written.
     """
     import time
 
     timings = timings if timings is not None else {}
     written = []
+    worker = None
+    if isinstance(figure, tuple):
+        worker, title = figure
+        if table is not None:
+            worker.submit(folder / "tracking.png", table, title)
+        else:
+            worker.cancel()
+            worker = None
+        figure = None
     write_text(folder / "config.resolved.yaml", config_yaml)
     written.append("config.resolved.yaml")
     t0 = time.perf_counter()
@@ -58,6 +69,10 @@ def write_simulation(
     t2 = time.perf_counter()
     timings["csv"] = t1 - t0
     timings["figure"] = t2 - t1 + timings.get("figure_draw", 0.0)
+    if worker is not None:  # drawn meanwhile in the worker's process
+        timings["figure"] = worker.wait()
+        timings["figure_wait"] = time.perf_counter() - t2
+        written.append("tracking.png")
     written.append("manifest.json")
     write_json(folder / "manifest.json", manifest("simulate", timings_s=timings,
                                                   outputs=written, **manifest_fields))
