@@ -85,8 +85,10 @@ def load_profile(path: str | Path, value: str = "theta_ref_deg",
     import pandas as pd
 
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise EmaError(f"profile '{p}' does not exist")
+    if not p.is_file():
+        raise EmaError(f"profile '{p}' is not a file (a CSV with columns t_s, {value})")
     try:
         df = pd.read_csv(p)
     except Exception as exc:  # pandas raises many types for malformed files

@@ -239,3 +239,10 @@ def test_a_ramp_stops_its_amplitude_away_in_the_rate_direction(end_deg, rate_deg
     assert ref.pos_half[-1] == pytest.approx(expected_deg * DEG, rel=1e-12)
     moving = abs(expected_deg) > 24  # no end: still moving at 5 s
     assert ref.vel[-1] == pytest.approx(rate_deg_s * DEG if moving else 0.0, abs=1e-15)
+
+
+def test_a_profile_that_is_not_a_file(tmp_path):
+    with pytest.raises(EmaError, match=r"is not a file \(a CSV with columns t_s, theta_ref_deg\)"):
+        load_profile(tmp_path)
+    with pytest.raises(EmaError, match=r"'/dev/null' is not a file"):
+        load_profile("/dev/null")
