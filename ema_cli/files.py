@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import secrets
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -16,52 +15,40 @@ from typing import Any
 RESULTS_ROOT = Path("results")
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_FILE_MODE = 0o666 & ~_umask()  # what open() would give a new file
-
-
 def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Write ``path`` through ``write(tmp)`` into a temporary sibling, then rename it into place."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    os.chmod(tmp, _FILE_MODE)  # mkstemp creates 0600; results are ordinary shared files
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def save_array(path: Path, array: Any) -> None:
-    """Atomically write a numpy array as ``.npy`` (no pickles), through :class:`AtomicFile`."""
-    import numpy as np
-
+    """Write ``path`` through ``write(tmp)``, ``tmp`` a fresh temporary sibling that ``write``
+    creates (:class:`AtomicFile`), then rename it into place; on any error nothing is left."""
     f = AtomicFile(path)
     try:
-        with open(f.tmp, "xb") as out:
-            np.save(out, array, allow_pickle=False)
+        write(f.tmp)
         f.commit()
     except BaseException:
         f.discard()
         raise
 
 
-class AtomicFile:
-    """A file written over time (e.g. streamed as results arrive) into a temporary sibling.
+def save_array(path: Path, array: Any) -> None:
+    """Atomically write a numpy array as ``.npy`` (no pickles), through :func:`atomic_write`;
+    the temporary file is created exclusively (``xb``)."""
+    import numpy as np
 
-    ``tmp`` is a fresh unique name beside ``path`` that the writer creates (a new file: ext4
-    flushes a file truncated by its writer when it is closed, measured 0.25 s per GB);
-    :meth:`commit` renames it to ``path`` (atomic on one filesystem), :meth:`discard` deletes
-    it. Until ``commit`` nothing exists under ``path``, so an interrupted write never leaves a
-    partial file there.
+    def write(tmp: Path) -> None:
+        with open(tmp, "xb") as out:
+            np.save(out, array, allow_pickle=False)
+
+    atomic_write(path, write)
+
+
+class AtomicFile:
+    """A file written (possibly over time, streamed as results arrive) into a temporary sibling:
+    the one implementation behind :func:`atomic_write` and :func:`save_array`.
+
+    ``tmp`` is a fresh unique name beside ``path`` (48 random bits) that the writer creates,
+    with the mode ``open`` gives a new file; never an existing file truncated by its writer
+    (ext4's auto_da_alloc forces out a file truncated and rewritten when it is closed: 0.25 s
+    per GB measured). :meth:`commit` renames it to ``path`` (atomic on one filesystem),
+    :meth:`discard` deletes it. Until ``commit`` nothing exists under ``path``, so an
+    interrupted write never leaves a partial file there.
     """
 
     def __init__(self, path: Path) -> None:

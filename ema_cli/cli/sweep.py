@@ -51,21 +51,6 @@ def _load(config: Path, set_: list[str] | None) -> tuple[Any, list[tuple[str, st
     return load_config(config, overrides, StudyConfig), overrides
 
 
-def default_cache(out: Path | None) -> Path | None:
-    """The job cache of a sweep written to ``out``: the shared ``results/.cache/sweep`` when the
-    output goes under ``results/`` (None), else ``<out>/.cache`` (nothing is written outside an
-    explicit output folder)."""
-    from ema_cli.files import RESULTS_ROOT
-
-    if out is None:
-        return None
-    try:
-        out.resolve().relative_to(RESULTS_ROOT.resolve())
-    except ValueError:
-        return out / ".cache"
-    return None
-
-
 def summary_table(result: SweepResult) -> Table:
     """The closing terminal table: one row per job (capped), key metrics in edge units."""
     from rich.table import Table
@@ -129,9 +114,9 @@ def sweep_cmd(
         raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
     cfg, overrides = _load(config, set_)
     result = run_sweep(cfg, out, n_jobs, backend, force, progress, scheduler=scheduler,
-                       cache_dir=cache_dir if cache_dir is not None else default_cache(out),
-                       base_dir=config.parent, source=str(config), overrides=overrides)
-    for w in result.plan.warnings:
+                       cache_dir=cache_dir, base_dir=config.parent, source=str(config),
+                       overrides=overrides)
+    for w in result.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     for n in result.plan.notes:
         console.print(f"note: {n}")

@@ -30,7 +30,7 @@ from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
 from ema_cli.report.identify_figures import identification_summary
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
-from ema_cli.report.sweep_report import run_sweep
+from ema_cli.report.sweep_report import default_cache_dir, run_sweep
 from ema_cli.report.threshold_figures import threshold_figure
 
 FIGURE_METRICS = ("t50_s", "overshoot_pct", "settling_time_s", "p2p_err_pos_deg",
@@ -62,6 +62,7 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
         cfg, cpath = study_config(path, s.config)
         log(f"study {s.id}: {cpath}")
         res = run_sweep(cfg, _under(out, "studies", s.id), n_jobs=n_jobs, progress=progress,
+                        cache_dir=default_cache_dir(out),  # one cache for every study
                         base_dir=cpath.parent, source=str(cpath))
         rep.studies[s.id] = res.metrics
         rep.sweeps[s.id] = res

@@ -42,8 +42,9 @@ import yaml
 
 from ema_cli import __version__
 from ema_cli.errors import EmaError
-from ema_cli.files import AtomicFile
+from ema_cli.files import RESULTS_ROOT, AtomicFile
 from ema_cli.report.rundir import (
+    CACHE_NAME,
     manifest,
     prepare_output,
     write_csv,
@@ -65,7 +66,10 @@ if TYPE_CHECKING:
 SIGNALS_FILE = "signals.parquet"
 ROW_GROUP_BYTES = 32 * 2**20  # target uncompressed size of one row group of signals.parquet
 PARQUET_COMPRESSION = "snappy"  # fast and read everywhere; floats compress little anyway
-COPY_BLOCK_BYTES = 2 * 2**20  # signals transposed into columns at a time (stay in cache)
+PARQUET_COMPRESSION_LEVEL: int | None = None  # codec level (zstd); None: the codec's default
+PARQUET_BYTE_STREAM_SPLIT = False  # BYTE_STREAM_SPLIT encoding for the signal columns
+PARQUET_THREAD = True  # encode row groups in a thread of their own (two buffers)
+TILE_ROWS = 2**14  # samples converted to columns by one numpy call (2.2 MB of signals) [-]
 PARQUET_BATCH_VALUES = 65536  # values the writer encodes at a time (pyarrow's default: 1024)
 PARQUET_PAGE_BYTES = 4 * 2**20  # data page size (pyarrow's default: 1 MiB)
 MAX_GROUPS_PER_AXIS = 3  # overlays per axis when other axes vary: first, middle, last value
@@ -123,6 +127,18 @@ def metric_label(edge: str) -> str:
     return f"{col.description} [{unit}]"
 
 
+def default_cache_dir(out: Path | None) -> Path:
+    """The job cache of outputs written to ``out``: the shared ``results/.cache/sweep`` when
+    they go under ``results/`` (``out`` None included), else ``<out>/.cache`` (nothing is
+    written outside an explicit output folder)."""
+    if out is not None:
+        try:
+            Path(out).resolve().relative_to(RESULTS_ROOT.resolve())
+        except ValueError:
+            return Path(out) / CACHE_NAME
+    return DEFAULT_CACHE_DIR
+
+
 def run_sweep(
     cfg: StudyConfig,
     out: Path | None = None,
@@ -143,7 +159,8 @@ def run_sweep(
 
     out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
                reused only if it holds an earlier run of the same sweep (resume in place).
-    cache_dir  job cache; None: ``results/.cache/sweep`` when writing, no cache otherwise
+    cache_dir  job cache; None: :func:`default_cache_dir` when writing (``results/.cache/
+               sweep``, or ``OUT/.cache`` when ``out`` is outside results/), no cache otherwise
     overrides  the ``--set`` pairs, recorded in the manifest
     write      False: write nothing (no folder, and no cache unless ``cache_dir`` is given);
                the recorded signals stay readable from the result (kept in memory)
@@ -158,7 +175,7 @@ def run_sweep(
     folder: Path | None = None
     writer: SignalsWriter | None = None
     if cache_dir is None and write:
-        cache_dir = DEFAULT_CACHE_DIR
+        cache_dir = default_cache_dir(out)
 
     def on_start(plan: Plan) -> None:
         nonlocal folder, writer
@@ -200,7 +217,8 @@ def run_sweep(
     return compute_sweep(cfg, n_jobs, backend, force, progress, scheduler=scheduler,
                          chunk_size=chunk_size, cache_dir=cache_dir, base_dir=base_dir,
                          source=source, on_start=on_start, on_signals=on_signals,
-                         on_finish=on_finish)
+                         on_finish=on_finish,
+                         keep_signals=not (write and cfg.outputs.timeseries))
 
 
 def save_sweep(result: SweepResult, out: Path | None = None,
@@ -263,20 +281,32 @@ class SignalsWriter:
         swept = self._swept
         width = 2 + len(swept) + N_SIGNALS  # columns of 8 bytes or fewer
         self.group_jobs = max(1, min(len(plan.jobs), ROW_GROUP_BYTES // (self.n_out * 8 * width)))
-        self._buf: np.ndarray | None = None  # [N_SIGNALS, group_jobs * n_out], edge units
-        self._block = max(1, COPY_BLOCK_BYTES // (self.n_out * N_SIGNALS * 8))
+        self._buffers: list[np.ndarray] = []  # two [N_SIGNALS, group_jobs * n_out], edge units
+        self._buf: np.ndarray | None = None  # the one being filled
+        self._sent: np.ndarray | None = None  # the one last handed to the encoder
+        self._factors = np.array([[c.factor] for c in SIGNALS])  # SI -> edge units
         self._jobs: list[int] = []  # job index of each job in the buffer
+        self._pool: Any = None  # the encoder thread
+        self._pending: Any = None  # the row group it is writing (a Future)
         self._index = np.repeat(np.arange(self.group_jobs, dtype=np.int32), self.n_out)
         self._t = np.tile(np.arange(self.n_out) * (plan.dec * plan.dt), self.group_jobs)
         self.schema = signals_schema(plan, swept, self._text)
         self._file = AtomicFile(path)
         self._writer = None
+        plain = [c.edge for c in SIGNALS if c.edge not in DICTIONARY_SIGNALS]
         try:
             self._writer = pq.ParquetWriter(
                 self._file.tmp, self.schema, compression=PARQUET_COMPRESSION,
+                compression_level=PARQUET_COMPRESSION_LEVEL,
                 write_batch_size=PARQUET_BATCH_VALUES, data_page_size=PARQUET_PAGE_BYTES,
                 use_dictionary=[JOB_COLUMN, *swept, TIME_COLUMN, *DICTIONARY_SIGNALS],
+                column_encoding=(dict.fromkeys(plain, "BYTE_STREAM_SPLIT")
+                                 if PARQUET_BYTE_STREAM_SPLIT else None),
                 write_statistics=[JOB_COLUMN, *swept, TIME_COLUMN])
+            if PARQUET_THREAD:
+                from concurrent.futures import ThreadPoolExecutor
+
+                self._pool = ThreadPoolExecutor(1, thread_name_prefix="ema-parquet")
         except BaseException as exc:
             self.discard()
             self._raise(exc)
@@ -289,24 +319,18 @@ class SignalsWriter:
     def add(self, jobs: Sequence[int], rows: Sequence[int], signals: np.ndarray) -> None:
         """Append job ``jobs[i]``'s SI ``signals[rows[i]]`` ([n_out, N_SIGNALS])."""
         try:
-            if self._buf is None:
-                self._buf = np.empty((N_SIGNALS, self.group_jobs * self.n_out))
             rows = np.asarray(rows, dtype=np.int64)
             i = 0
             while i < len(rows):
-                # a block of consecutive rows that fits the CPU cache (and the row group)
-                m = min(self._block, self.group_jobs - len(self._jobs), len(rows) - i)
+                if self._buf is None:
+                    self._buf = self._free_buffer()
+                # a run of consecutive rows that fits the row group
+                m = min(self.group_jobs - len(self._jobs), len(rows) - i)
                 r0 = int(rows[i])
-                if not np.array_equal(rows[i:i + m], np.arange(r0, r0 + m)):
-                    m = 1
-                src = signals[r0:r0 + m]  # [m, n_out, N_SIGNALS], SI
-                a = len(self._jobs) * self.n_out
-                for k, c in enumerate(SIGNALS):  # to edge units, one column at a time
-                    out = self._buf[k, a:a + m * self.n_out].reshape(m, self.n_out)
-                    if c.factor == 1.0:
-                        np.copyto(out, src[:, :, k])
-                    else:
-                        np.multiply(src[:, :, k], c.factor, out=out)
+                run = rows[i:i + m] - r0 == np.arange(m)
+                if not run.all():
+                    m = int(np.argmin(run))  # >= 1: run[0] is True
+                self._convert(signals[r0:r0 + m], len(self._jobs) * self.n_out)
                 self._jobs.extend(jobs[i:i + m])
                 i += m
                 if len(self._jobs) == self.group_jobs:
@@ -315,12 +339,51 @@ class SignalsWriter:
             self.discard()
             self._raise(exc)
 
+    def _free_buffer(self) -> np.ndarray:
+        """The buffer the row group being written does not use (two in all: :meth:`_flush`
+        waits for the previous row group before it hands on the next)."""
+        if len(self._buffers) < 2:
+            self._buffers.append(np.empty((N_SIGNALS, self.group_jobs * self.n_out)))
+            return self._buffers[-1]
+        return self._buffers[0] if self._sent is self._buffers[1] else self._buffers[1]
+
+    def _convert(self, src: np.ndarray, a: int) -> None:
+        """SI ``src[m, n_out, N_SIGNALS]`` into the buffer's columns from sample ``a`` on, in
+        edge units: one numpy call per tile of :data:`TILE_ROWS` samples (the tile stays in
+        the CPU cache while it is transposed)."""
+        flat = src.reshape(-1, N_SIGNALS)
+        for b in range(0, len(flat), TILE_ROWS):
+            tile = flat[b:b + TILE_ROWS]
+            np.multiply(tile.T, self._factors, out=self._buf[:, a + b:a + b + len(tile)])
+
+    def _wait(self) -> None:
+        """Wait for the row group being written (re-raises its error)."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending.result()
+
     def _flush(self) -> None:
-        """Write the buffered jobs as one row group."""
-        pa = self._pa
+        """Write the buffered jobs as one row group: in the encoder thread, while the next
+        row group is filled (and the next chunk computed)."""
         m = len(self._jobs)
         if m == 0 or self._buf is None or self._writer is None:
             return
+        table = self._table(m)
+        self._wait()  # one row group in flight: the other buffer is free again
+        if self._pool is not None:
+            self._pending = self._pool.submit(self._writer.write_table, table,
+                                              row_group_size=table.num_rows)
+        else:
+            self._writer.write_table(table, row_group_size=table.num_rows)
+        self.rows += table.num_rows
+        self._jobs = []
+        self._sent, self._buf = self._buf, None
+
+    def _table(self, m: int) -> Any:
+        """The buffered ``m`` jobs as an Arrow table (the signal columns are views of the
+        buffer: no copy)."""
+        assert self._buf is not None
+        pa = self._pa
         n = m * self.n_out
         index = pa.array(self._index[:n])
         jobs = np.array(self._jobs)
@@ -341,26 +404,34 @@ class SignalsWriter:
                 columns.append(text([self._text[c][i] for i in jobs]))
         columns.append(pa.array(self._t[:n]))
         columns += [pa.array(self._buf[k, :n]) for k in range(N_SIGNALS)]
-        table = pa.Table.from_arrays(columns, schema=self.schema)
-        self._writer.write_table(table, row_group_size=n)
-        self.rows += n
-        self._jobs = []
+        return pa.Table.from_arrays(columns, schema=self.schema)
 
     def commit(self) -> Path:
         """Write the last row group, close the file and rename it into place."""
         try:
             self._flush()
+            self._wait()
             assert self._writer is not None
             self._writer.close()
             self._writer = None
+            self._stop()
             return self._file.commit()
         except BaseException as exc:
             self.discard()
             self._raise(exc)
             raise  # not reached
 
+    def _stop(self) -> None:
+        """End the encoder thread once the row group it writes is done (errors ignored)."""
+        with contextlib.suppress(Exception):
+            self._wait()
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
     def discard(self) -> None:
         """Close and delete the unfinished file (a no-op after :meth:`commit`)."""
+        self._stop()  # first: the encoder thread may be writing into the file
         if self._writer is not None:
             writer, self._writer = self._writer, None
             with contextlib.suppress(Exception):  # the file is deleted anyway
@@ -459,10 +530,9 @@ def write_manifest(result: SweepResult, overrides: Sequence[tuple[str, Any]],
         state = "incomplete"
     else:
         state = "complete"
-    df = result.metrics
-    jobs = [{"job": j.id, "label": j.label, "key": j.key, "status": df["status"].iloc[j.index],
-             **({"error": df["error"].iloc[j.index]} if df["error"].iloc[j.index] else {})}
-            for j in plan.jobs]
+    status, errors = list(result.metrics["status"]), list(result.metrics["error"])
+    jobs = [{"job": j.id, "label": j.label, "key": j.key, "status": status[j.index],
+             **({"error": errors[j.index]} if errors[j.index] else {})} for j in plan.jobs]
     write_json(folder / "manifest.json", manifest(
         "sweep", name=plan.cfg.name, description=plan.cfg.description, sweep_key=plan.key,
         status=state, seed=plan.cfg.seed, input=plan.signal.describe(),
@@ -474,6 +544,8 @@ def write_manifest(result: SweepResult, overrides: Sequence[tuple[str, Any]],
         backend=result.backend, workers=result.workers,
         cache_dir=result.cache.root if result.cache is not None else None,
         cache_corrupt_entries=result.cache_corrupt,
+        signals_cache=(result.signals_rule.describe()
+                       if result.signals_rule is not None and result.cache is not None else None),
         signals_file=(str(result.signals_file.relative_to(folder))
                       if result.signals_file is not None else None),
         relative_scales=plan.scales, warnings=result.warnings, notes=plan.notes,
@@ -749,7 +821,7 @@ def summary_markdown(result: SweepResult) -> str:
         lines.append("- relative magnitudes are % of the baseline's peak signal: " + ", ".join(
             f"{k} {v:.4g}" for k, v in plan.scales.items()))
     lines += [f"- note: {n}" for n in plan.notes]
-    lines += [f"- warning: {w}" for w in plan.warnings]
+    lines += [f"- warning: {w}" for w in result.warnings]
     if result.interrupted:
         lines.append("- **interrupted**: re-run the same command to finish (cached jobs are kept)")
     cols = ["job", "label", "status"] + list(cfg.outputs.metrics)

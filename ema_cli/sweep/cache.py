@@ -21,16 +21,23 @@ Every entry is verified before it is served: a metrics blob or a signals row who
 a wrong shape. Such an entry is never used: it is recorded in :attr:`JobCache.corrupt` (the
 sweep recomputes the job, which replaces the entry, and reports the count). A row that simply
 is not there (a job never run, or run without recording) is missing, not corrupt.
+
+The metrics of every finished job are always cached; its recorded signals only when storing them
+costs little next to computing them again (:func:`signals_rule`): a second copy of dense signals
+costs more disk time than a re-run spends recomputing the job. A sweep that needs the signals of a
+job whose metrics are cached but signals are not recomputes that job (bit-identical).
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import secrets
 import sqlite3
 import zlib
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +57,12 @@ SCHEMA = (
     "file TEXT NOT NULL, row INTEGER NOT NULL, n_out INTEGER NOT NULL, crc INTEGER NOT NULL, "
     "PRIMARY KEY (key, dec))",
 )
+SIGNALS_MAX_SHARE = 0.2  # cache a job's signals only if storing them costs <= this share of
+# computing the job (so a re-run that reads them saves at least 5x what storing them cost) [-]
+STORE_BYTES_PER_S = 1.0e9  # storing signals (.npy write + CRC-32 of each row), one thread: 1.8
+# GB/s alone, 0.9 GB/s beside the signals.parquet writer (1,000-job bench, 2 cores) [bytes/s]
+KERNEL_CPU_S_PER_STEP = 22e-9  # kernel time per job and integration step on one core: 1.1 s
+# for the bench's 1,000 jobs x 1e5 steps on 2 threads (AMD EPYC; a nonlinearity adds ~10 %) [s]
 SignalRow = tuple[str, int, int, int]
 """Where a job's signals are: (file relative to ``signals/``, row, n_out, CRC-32)."""
 
@@ -61,6 +74,49 @@ HEADER_READERS = {(1, 0): np.lib.format.read_array_header_1_0,
 def checksum(data: bytes | np.ndarray) -> int:
     """CRC-32 of a bytes object or of an array's bytes (C order)."""
     return zlib.crc32(data if isinstance(data, bytes) else np.ascontiguousarray(data))
+
+
+@dataclass(frozen=True)
+class SignalsRule:
+    """Whether a sweep's recorded signals go into the job cache, and why (for the manifest).
+
+    ``store_s`` / ``kernel_s``: estimated seconds to store one job's signals / to compute the
+    job again (wall, ``workers`` threads); ``share`` their ratio; ``cache`` = share <=
+    :data:`SIGNALS_MAX_SHARE`.
+    """
+
+    cache: bool
+    bytes_per_job: int
+    store_s: float
+    kernel_s: float
+    share: float
+
+    def describe(self) -> dict[str, object]:
+        """The manifest's record of the decision."""
+        return {"cached": self.cache, "bytes_per_job": self.bytes_per_job,
+                "estimated_store_s_per_job": self.store_s,
+                "estimated_kernel_s_per_job": self.kernel_s,
+                "estimated_store_share": round(self.share, 4),
+                "rule": f"signals cached when storing them is estimated to cost <= "
+                        f"{SIGNALS_MAX_SHARE:.0%} of computing the job again"}
+
+
+def signals_rule(n_steps: int, n_out: int, workers: int = 1) -> SignalsRule:
+    """Cache a job's signals (``n_out`` samples of ``N_SIGNALS`` float64) only when storing them
+    is estimated to cost at most :data:`SIGNALS_MAX_SHARE` of recomputing the job (``n_steps``
+    kernel steps on ``workers`` threads).
+
+    The estimate uses measured constants (:data:`STORE_BYTES_PER_S`,
+    :data:`KERNEL_CPU_S_PER_STEP`); it depends only on the plan and the worker count, so the
+    same sweep makes the same decision every time. Both sides scale with the samples per step:
+    on 2 workers, signals recorded every 62 or more integration steps are cached (the bench's
+    1e-3 s at dt 1e-5 s: 100 steps, estimated 12 %), denser ones are not (1e-4 s: 124 %).
+    """
+    nbytes = n_out * N_SIGNALS * 8
+    store = nbytes / STORE_BYTES_PER_S
+    kernel = n_steps * KERNEL_CPU_S_PER_STEP / max(workers, 1)
+    share = store / kernel if kernel > 0 else math.inf
+    return SignalsRule(n_out > 0 and share <= SIGNALS_MAX_SHARE, nbytes, store, kernel, share)
 
 
 class JobCache:

@@ -22,7 +22,7 @@ import pandas as pd
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.sim.tables import MET, METRICS, N_METRICS, N_SIGNALS, SIGNALS
-from ema_cli.sweep.cache import JobCache
+from ema_cli.sweep.cache import JobCache, SignalsRule, signals_rule
 from ema_cli.sweep.execute import (
     ChunkOutput,
     check_dask,
@@ -55,13 +55,16 @@ class SweepResult:
     simulator metric in edge units (``sim.tables``), the content hash ``key`` and the ``error``
     text of a failed job. ``folder`` is the output folder and ``signals_file`` the signals table
     written there (None if nothing was written; the report layer sets them). ``cache`` is the
-    job cache (None: none was used; the recorded signals are then kept in memory).
-    ``cache_corrupt`` counts the cache entries found damaged, not used and recomputed (the
-    warning is in ``warnings``). ``timings`` are wall seconds: plan, lookup, warm, execute,
-    kernel (summed over workers), store (cache writes), signals (the ``on_signals`` hook,
-    i.e. writing signals.parquet as chunks finish; it runs alongside the cache writes),
-    writes (handling finished chunks: both of those, as the sweep waited for them), outputs,
-    total.
+    job cache (None: none was used). ``signals_rule`` says whether the recorded signals went
+    into the cache (``sweep.cache.signals_rule``; None: nothing recorded or no cache); the
+    signals of computed jobs not cached are kept in ``memory`` unless the caller streamed them
+    to a file (``keep_signals`` False). ``cache_corrupt`` counts the cache entries found
+    damaged, not used and recomputed (the warning is in ``run_warnings``, shown with the
+    plan's in ``warnings``). ``timings`` are wall seconds: plan, lookup, warm, execute, kernel
+    (summed over workers), store (cache writes), signals (the ``on_signals`` hook, i.e.
+    streaming signals.parquet as chunks finish: converting the signals to columns and waiting
+    for the encoder thread; it runs alongside the cache writes), writes (handling finished
+    chunks: both of those, as the sweep waited for them), outputs, total.
     """
 
     plan: Plan
@@ -78,6 +81,8 @@ class SweepResult:
     signals_file: Path | None = None
     cache_corrupt: int = 0
     memory: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    signals_rule: SignalsRule | None = None
+    run_warnings: list[str] = field(default_factory=list)
 
     @property
     def jobs(self) -> list[Job]:
@@ -86,8 +91,14 @@ class SweepResult:
 
     @property
     def warnings(self) -> list[str]:
-        """What the user should be told: the plan's warnings and damaged cache entries."""
-        return self.plan.warnings
+        """What the user should be told: the plan's warnings, then the run's (damaged cache
+        entries)."""
+        return [*self.plan.warnings, *self.run_warnings]
+
+    @property
+    def signals_cached(self) -> bool:
+        """True if the recorded signals of computed jobs were stored in the job cache."""
+        return self.signals_rule is not None and self.signals_rule.cache
 
     def counts(self) -> dict[str, int]:
         """Jobs per status."""
@@ -106,7 +117,8 @@ class SweepResult:
         """SI signals[n_out, N_SIGNALS] of one job (columns: ``sim.tables.SIGNALS``).
 
         From memory or the job cache (bit for bit what the kernel recorded), else from
-        ``signals_file`` (edge units converted back: equal to within rounding).
+        ``signals_file`` (edge units converted back: equal to within rounding; the way back for
+        the jobs whose signals were not cached, see ``signals_rule``).
         """
         j = self._job(job)
         if self.plan.dec <= 0:
@@ -225,6 +237,7 @@ def compute_sweep(
     on_start: Callable[[Plan], None] | None = None,
     on_signals: OnSignals | None = None,
     on_finish: Callable[[SweepResult, bool], None] | None = None,
+    keep_signals: bool = True,
 ) -> SweepResult:
     """Run every job of a sweep (finished ones from the cache) and return the result.
 
@@ -248,8 +261,14 @@ def compute_sweep(
     on_finish  ``on_finish(result, aborted)``: called when execution ends, also on Ctrl-C or
                an error (``aborted`` True, the result holds the finished jobs) before the
                exception propagates (the report layer writes the outputs here)
+    keep_signals  keep the recorded signals that do not go into the cache in memory, for the
+               result's ``signals`` / ``timeseries``; False: ``on_signals`` stores them where
+               the result reads them back (the report layer's signals.parquet)
 
-    Finished jobs are stored in the cache as each chunk completes; on Ctrl-C ``on_finish``
+    Finished jobs are stored in the cache as each chunk completes: always their metrics, their
+    recorded signals only when ``sweep.cache.signals_rule`` says storing them costs little next
+    to computing them (a later sweep that needs the signals of a job whose signals are not
+    cached recomputes that job, bit-identical); on Ctrl-C ``on_finish``
     runs and KeyboardInterrupt is re-raised. A job whose chunk raised is marked failed (error
     text in the result) and the sweep goes on; an exception in ``on_signals`` stops it. Cache
     entries that fail their checksum are recomputed and reported (``cache_corrupt``, a
@@ -271,6 +290,9 @@ def compute_sweep(
 
     n = len(plan.jobs)
     n_out = plan.n_steps // plan.dec + 1 if plan.dec > 0 else 0
+    rule = (signals_rule(plan.n_steps, n_out, workers)
+            if n_out > 0 and cache_dir is not None else None)
+    cache_signals = rule is not None and rule.cache
     metrics = np.full((n, N_METRICS), np.nan)
     status = [PENDING] * n
     errors = [""] * n
@@ -281,6 +303,7 @@ def compute_sweep(
     first = {key: idxs[0] for key, idxs in by_key.items()}
     computed = cached = 0
     sink_failed = False
+    run_warnings: list[str] = []
 
     def finish(key: str, m: np.ndarray) -> None:
         st = DIVERGED if m[MET["diverged"]] == 1.0 else OK
@@ -304,10 +327,11 @@ def compute_sweep(
             timings["signals"] += time.perf_counter() - ts
 
     def store(keys: list[str], res: ChunkOutput) -> float:
-        """Store a finished chunk in the cache -> seconds taken."""
+        """Store a finished chunk in the cache (its signals if ``cache_signals``) -> seconds
+        taken."""
         ts = time.perf_counter()
         assert cache is not None and res.metrics is not None
-        cache.store(keys, res.metrics, res.signals, plan.dec)
+        cache.store(keys, res.metrics, res.signals if cache_signals else None, plan.dec)
         return time.perf_counter() - ts
 
     def on_chunk(i: int, res: ChunkOutput) -> None:
@@ -325,12 +349,11 @@ def compute_sweep(
                     errors[idx] = res.error or "no result"
         else:
             stored = None
-            if cache is None:
-                if res.signals is not None and plan.dec > 0:
-                    memory.update((key, res.signals[r]) for r, key in enumerate(keys))
-            elif pool is not None:
+            if keep_signals and not cache_signals and res.signals is not None and plan.dec > 0:
+                memory.update((key, res.signals[r]) for r, key in enumerate(keys))
+            if pool is not None:  # beside the signals writer: both spend their time off the GIL
                 stored = pool.submit(store, keys, res)
-            else:
+            elif cache is not None:
                 timings["store"] += store(keys, res)
             try:
                 hand_on(keys, res.signals)
@@ -350,14 +373,14 @@ def compute_sweep(
     interrupted = aborted = False
     try:
         cache = JobCache(cache_dir) if cache_dir is not None else None
-        if cache is not None and on_signals is not None and plan.dec > 0:
+        if cache is not None and on_signals is not None and cache_signals:
             pool = ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
         t0 = time.perf_counter()
         pending = _lookup(cache, by_key, force, plan.dec, n_out, finish, hand_on)
         pending.sort(key=first.__getitem__)
         cached = len(by_key) - len(pending)
         if cache is not None and cache.corrupt:
-            plan.warnings.append(_corrupt_warning(cache))
+            run_warnings.append(_corrupt_warning(cache))
         timings["lookup"] = time.perf_counter() - t0 - timings["signals"]
 
         sizes = chunk_sizes(len(pending), plan.n_steps, workers, backend, n_out,
@@ -399,7 +422,7 @@ def compute_sweep(
                              backend, workers, computed=computed, cached=cached,
                              interrupted=interrupted, timings=timings,
                              cache_corrupt=len(cache.corrupt) if cache is not None else 0,
-                             memory=memory)
+                             memory=memory, signals_rule=rule, run_warnings=run_warnings)
         if on_finish is not None:
             on_finish(result, aborted)
         timings["total"] = time.perf_counter() - t_start

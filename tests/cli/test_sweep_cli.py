@@ -69,10 +69,28 @@ def test_deadzone2_config_writes_every_output(tmp_path, monkeypatch):
     assert "| j0003 | deadzone2 = 0.1 deg | ok |" in summary
     assert "![errors_deadzone2](figures/errors_deadzone2.png)" in summary
 
+    # signals every 10 steps: cheaper to recompute than to store twice, so only the metrics are
+    # cached and the same sweep runs again; without time series every job comes from the cache
+    assert man["signals_cache"]["cached"] is False and (tmp_path / "results" / ".cache").is_dir()
     r = invoke("sweep", "deadzone2.yaml", "--set", "simulation.duration_s=0.1", "--no-progress")
     assert r.exit_code == 0, r.output
     assert len(list((tmp_path / "results" / "deadzone2").iterdir())) == 2  # never overwritten
+    assert "4 runs computed, 0 cached" in flat(r.output)
+    r = invoke("sweep", "deadzone2.yaml", "--set", "simulation.duration_s=0.1", "--set",
+               "outputs.timeseries=false", "--set", "outputs.figures=[metrics]", "--no-progress")
+    assert r.exit_code == 0, r.output
     assert "0 runs computed, 4 cached" in flat(r.output)
+
+
+def test_the_job_cache_goes_into_an_out_folder_outside_results(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(yaml.safe_dump(GOOD))
+    r = invoke("sweep", cfg, "--out", tmp_path / "run", "--no-progress")
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "run" / ".cache" / DB_NAME).is_file() and not (tmp_path / "results").exists()
+    r = invoke("sweep", cfg, "--out", tmp_path / "run2", "--no-progress")
+    assert r.exit_code == 0 and "3 runs computed, 0 cached" in flat(r.output)  # its own cache
 
 
 def test_validate_counts_jobs_and_show_lists_them(tmp_path):

@@ -1,5 +1,6 @@
-"""A sweep's outputs: signals.parquet (round trip, row groups, atomic), per-job CSVs on request,
-the job cache's checks (damaged entries recomputed and reported), no cache without outputs."""
+"""A sweep's outputs: signals.parquet (exact round trip, row groups, atomic), per-job CSVs on
+request, the job cache's checks (damaged entries recomputed and reported), where the cache goes,
+no cache without outputs."""
 
 from __future__ import annotations
 
@@ -17,10 +18,10 @@ import ema_cli.report.sweep_report as sweep_report
 from ema_cli.config.loader import load_config
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
-from ema_cli.files import AtomicFile
-from ema_cli.report.sweep_report import run_sweep
+from ema_cli.files import AtomicFile, atomic_write
+from ema_cli.report.sweep_report import default_cache_dir, run_sweep
 from ema_cli.sim.tables import METRICS, N_SIGNALS, SIGNALS
-from ema_cli.sweep.cache import DB_NAME
+from ema_cli.sweep.cache import DB_NAME, DEFAULT_CACHE_DIR
 from ema_cli.sweep.run import compute_sweep
 
 SIGNAL_COLS = [c.edge for c in SIGNALS]
@@ -66,9 +67,10 @@ def test_signals_parquet_round_trips_the_recorded_signals(tmp_path):
         assert (rows["deadzone2_deg"] == metrics["deadzone2_deg"].iloc[i]).all()
         si = res.signals(i)  # from the cache: what the kernel recorded, bit for bit
         assert si.shape == (N_OUT, N_SIGNALS)
-        for k, c in enumerate(SIGNALS):
-            np.testing.assert_allclose(rows[c.edge].to_numpy(), si[:, k] * c.factor,
-                                       rtol=1e-12, atol=0)
+        for k, c in enumerate(SIGNALS):  # every bit of float64 in edge units (NaN included)
+            assert rows[c.edge].dtype == np.float64
+            np.testing.assert_array_equal(rows[c.edge].to_numpy().view(np.uint64),
+                                          (si[:, k] * c.factor).view(np.uint64))
     # the figures' reader: one job's rows, t_s first, as `ema simulate` writes them
     ts = res.timeseries("j0002")
     assert list(ts.columns) == ["t_s", *SIGNAL_COLS] and len(ts) == N_OUT
@@ -80,6 +82,7 @@ def test_signals_parquet_round_trips_the_recorded_signals(tmp_path):
     assert pq.read_schema(path).field("current_a").metadata[b"unit"] == b"A"
     man = json.loads((tmp_path / "run" / "manifest.json").read_text())
     assert man["signals_file"] == "signals.parquet" and man["cache_corrupt_entries"] == 0
+    assert man["signals_cache"]["cached"] is True and res.signals_cached  # 100 steps apart
     assert not (tmp_path / "run" / "timeseries").exists()  # no per-job CSVs unless asked
 
 
@@ -134,7 +137,9 @@ def test_an_interrupted_signals_write_leaves_no_file(tmp_path, monkeypatch, wher
     assert man["signals_file"] is None
     monkeypatch.setattr(pq.ParquetWriter, where, real)
     res = sweep(tmp_path)  # the same --out: resumed, the stored jobs from the cache
-    assert res.cached == (2 if where == "write_table" else 4) and res.computed == 4 - res.cached
+    # a row group written in the encoder thread fails at the next one: job 3 was stored too
+    stored = 2 + sweep_report.PARQUET_THREAD if where == "write_table" else 4
+    assert res.cached == stored and res.computed == 4 - res.cached
     assert len(pd.read_parquet(res.signals_file)) == 4 * N_OUT and leftovers(run) == []
 
 
@@ -147,6 +152,22 @@ def test_atomic_file_commit_and_discard(tmp_path):
     g.tmp.write_bytes(b"partial")
     g.discard()
     assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["x.bin"]
+
+
+def test_atomic_write_creates_a_fresh_temporary_file(tmp_path):
+    seen = []
+
+    def write(tmp: Path) -> None:
+        seen.append(tmp.exists())  # not created beforehand: the writer creates it
+        tmp.write_text("new")
+
+    target = tmp_path / "x.txt"
+    target.write_text("old")
+    atomic_write(target, write)
+    assert seen == [False] and target.read_text() == "new" and leftovers(tmp_path) == []
+    mask = __import__("os").umask(0)
+    __import__("os").umask(mask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~mask  # as open() makes a new file
 
 
 def test_damaged_cache_entries_are_recomputed_and_reported(tmp_path):
@@ -175,6 +196,8 @@ def test_damaged_cache_entries_are_recomputed_and_reported(tmp_path):
     assert again.cache_corrupt == 3 and again.computed == 3 and again.cached == 1
     (warning,) = [w for w in again.warnings if "job cache" in w]
     assert "3 damaged entries not used and recomputed" in warning and "\n" not in warning
+    assert warning in again.run_warnings and warning not in again.plan.warnings
+    assert f"- warning: {warning}" in (tmp_path / "again" / "summary.md").read_text()
     man = json.loads((tmp_path / "again" / "manifest.json").read_text())
     assert man["cache_corrupt_entries"] == 3 and warning in man["warnings"]
     np.testing.assert_array_equal(again.metrics[METRIC_COLS].to_numpy(float),
@@ -201,3 +224,19 @@ def test_no_cache_and_no_files_without_outputs(tmp_path, monkeypatch):
     ts = res.timeseries("j0001")
     np.testing.assert_array_equal(ts["theta_load_deg"].to_numpy(),
                                   res.signals(1)[:, 1] * SIGNALS[1].factor)
+
+
+def test_the_default_cache_follows_the_output_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    cfg = load_config(study(tmp_path), (), StudyConfig)
+    res = run_sweep(cfg, tmp_path / "out", n_jobs=1, progress=False)  # outside results/
+    assert res.cache is not None and res.cache.root == tmp_path / "out" / ".cache"
+    assert (tmp_path / "out" / ".cache" / DB_NAME).is_file()
+    assert not (tmp_path / "results").exists()
+    res = run_sweep(cfg, None, n_jobs=1, progress=False)  # results/<name>/<stamp>: shared cache
+    assert res.cache is not None and res.cache.root == DEFAULT_CACHE_DIR
+    assert res.cached == 0 and res.computed == 4  # another cache
+    assert (tmp_path / DEFAULT_CACHE_DIR / DB_NAME).is_file()
+    assert default_cache_dir(Path("results") / "mine") == DEFAULT_CACHE_DIR
+    assert default_cache_dir(tmp_path / "results" / "x") == DEFAULT_CACHE_DIR  # absolute
+    assert default_cache_dir(tmp_path / "elsewhere") == tmp_path / "elsewhere" / ".cache"

@@ -1,4 +1,5 @@
-"""Whole sweeps: equal to `ema simulate`, bit-identical across backends, resumable, on Dask."""
+"""Whole sweeps: equal to `ema simulate`, bit-identical across backends, resumable (also when
+the signals were not cached), on Dask."""
 
 from __future__ import annotations
 
@@ -11,13 +12,15 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
+import ema_cli.sweep.cache as job_cache
 import ema_cli.sweep.execute as execute
 from ema_cli.cli.main import app
 from ema_cli.config.loader import load_config
 from ema_cli.config.study import StudyConfig
 from ema_cli.report.sweep_report import run_sweep
 from ema_cli.sim.runner import simulate
-from ema_cli.sim.tables import METRICS
+from ema_cli.sim.tables import METRICS, N_SIGNALS
+from ema_cli.sweep.cache import JobCache
 from ema_cli.sweep.execute import WARM_STEPS
 
 runner = CliRunner()
@@ -190,3 +193,79 @@ def test_dask_backend_on_a_local_cluster_equals_local(tmp_path, processes):
                                   ref.metrics[METRIC_COLS].to_numpy(float))
     for i in range(4):
         np.testing.assert_array_equal(res.signals(i), ref.signals(i))
+
+
+def signal_rows(cache: Path, res) -> dict[str, bool]:
+    """Which jobs of ``res`` have signals (at its decimation) in ``cache``."""
+    rows = JobCache(cache).signal_rows([j.key for j in res.jobs], res.plan.dec)
+    return {j.id: j.key in rows for j in res.jobs}
+
+
+def test_a_rerun_recomputes_exactly_the_jobs_whose_signals_were_not_cached(tmp_path,
+                                                                           monkeypatch):
+    full = write_config(tmp_path)
+    (tmp_path / "p").mkdir()
+    part = write_config(tmp_path / "p", sweep={"axes": [{"nonlinearity": "deadzone2",
+                                                         "values": [0.001]}]})
+    cache = tmp_path / "cache"
+    # 1. two jobs (baseline, 0.001) with their signals cached
+    monkeypatch.setattr(job_cache, "SIGNALS_MAX_SHARE", float("inf"))
+    first = sweep(tmp_path, "part", part, n_jobs=1, cache_dir=cache)
+    assert first.signals_cached and all(signal_rows(cache, first).values())
+    # 2. the full sweep with signals not cached: 2 from the cache, 2 computed (metrics stored)
+    monkeypatch.setattr(job_cache, "SIGNALS_MAX_SHARE", 0.0)
+    second = sweep(tmp_path, "full", full, n_jobs=1, cache_dir=cache)
+    assert (second.cached, second.computed) == (2, 2) and not second.signals_cached
+    assert signal_rows(cache, second) == {"j0000": True, "j0001": True, "j0002": False,
+                                          "j0003": False}
+    assert sorted(JobCache(cache).lookup([j.key for j in second.jobs])) == sorted(
+        j.key for j in second.jobs)  # every job's metrics (and their checksums) are cached
+    man = json.loads((tmp_path / "full" / "manifest.json").read_text())
+    assert man["signals_cache"]["cached"] is False and man["signals_cache"]["bytes_per_job"] == (
+        101 * N_SIGNALS * 8)
+    # 3. again: exactly the two jobs without cached signals run, nothing else
+    kernel = CountingKernel()
+    monkeypatch.setattr(execute, "simulate_batch", kernel)
+    third = sweep(tmp_path, "again", full, n_jobs=1, cache_dir=cache)
+    assert (third.cached, third.computed) == (2, 2) and len(kernel.rows) == 2
+    P = third.plan.P([third.jobs[2], third.jobs[3]])  # deadzone2 = 0.01 and 0.1 deg
+    assert sorted(r.tobytes() for r in kernel.rows) == sorted(r.tobytes() for r in P)
+    # bit-identical to the same sweep computed from scratch, without any cache
+    monkeypatch.setattr(execute, "simulate_batch", REAL_KERNEL_CALL)
+    ref = run_sweep(load_config(full, (), StudyConfig), None, n_jobs=1, progress=False,
+                    write=False)
+    for res in (second, third):
+        np.testing.assert_array_equal(res.metrics[METRIC_COLS].to_numpy(float),
+                                      ref.metrics[METRIC_COLS].to_numpy(float))
+        table = pd.read_parquet(res.signals_file).astype({"job": str}).sort_values(
+            ["job", "t_s"], ignore_index=True)
+        for i, job in enumerate(res.jobs):
+            rows = table[table["job"] == job.id].drop(columns=["job", "deadzone2_deg"])
+            np.testing.assert_array_equal(rows.to_numpy(), ref.timeseries(i).to_numpy())
+
+
+def test_dense_signals_are_not_cached_and_stay_with_the_result(tmp_path):
+    """Recording every step: storing the signals would cost more than computing them again."""
+    every_step = write_config(tmp_path, simulation={"duration_s": 0.02, "dt_s": 1e-5,
+                                                    "output_interval_s": 1e-5})
+    cache = tmp_path / "cache"
+    first = sweep(tmp_path, "a", every_step, n_jobs=1, cache_dir=cache)
+    assert not first.signals_cached and first.signals_rule.share > 1
+    assert not any(signal_rows(cache, first).values())
+    again = sweep(tmp_path, "b", every_step, n_jobs=1, cache_dir=cache)
+    assert (again.cached, again.computed) == (0, 4)  # the signals are needed: recomputed
+    pd.testing.assert_frame_equal(pd.read_parquet(first.signals_file),
+                                  pd.read_parquet(again.signals_file))
+    # no output folder (the Python API) with a cache: the signals are kept with the result
+    cfg = load_config(every_step, (), StudyConfig)
+    lib = run_sweep(cfg, None, n_jobs=1, progress=False, cache_dir=cache, write=False)
+    assert lib.cached == 0 and lib.signals_file is None and len(lib.memory) == 4
+    for i in range(4):
+        np.testing.assert_array_equal(
+            lib.timeseries(i).to_numpy(),
+            pd.read_parquet(first.signals_file, filters=[("job", "==", lib.jobs[i].id)])
+            .drop(columns=["job", "deadzone2_deg"]).to_numpy())
+    metrics_only = run_sweep(cfg.model_copy(update={"outputs": cfg.outputs.model_copy(
+        update={"timeseries": False, "figures": []})}), tmp_path / "c", n_jobs=1,
+        progress=False, cache_dir=cache)
+    assert metrics_only.plan.dec == 0 and (metrics_only.cached, metrics_only.computed) == (4, 0)

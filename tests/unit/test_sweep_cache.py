@@ -8,7 +8,7 @@ import pytest
 
 from ema_cli.errors import EmaError
 from ema_cli.sim.tables import N_METRICS, N_SIGNALS
-from ema_cli.sweep.cache import DB_NAME, JobCache
+from ema_cli.sweep.cache import DB_NAME, SIGNALS_MAX_SHARE, JobCache, signals_rule
 from ema_cli.sweep.execute import chunk_sizes, resolve_backend, resolve_workers
 
 
@@ -126,6 +126,20 @@ def test_cache_in_an_unusable_place_is_a_clear_error(tmp_path):
     (tmp_path / "c" / DB_NAME).write_text("not a database")
     with pytest.raises(EmaError, match="cannot be used"):
         JobCache(tmp_path / "c")
+
+
+def test_signals_are_cached_only_when_storing_them_costs_little_next_to_computing_them():
+    # the bench's 1 s at dt 1e-5 on 2 workers: every 1e-3 s (100 steps) cached, 1e-4 s not
+    sparse, dense = signals_rule(100_000, 1001, 2), signals_rule(100_000, 10_001, 2)
+    assert sparse.cache and 0.1 < sparse.share < SIGNALS_MAX_SHARE
+    assert not dense.cache and dense.share > 1
+    assert dense.bytes_per_job == 10_001 * N_SIGNALS * 8
+    assert dense.share == pytest.approx(10 * sparse.share, rel=1e-3)  # bytes per step decide
+    # more workers compute a job faster again: the same samples stop paying for their copy
+    assert not signals_rule(100_000, 1001, 4).cache
+    assert not signals_rule(100_000, 0, 1).cache  # nothing recorded
+    record = sparse.describe()
+    assert record["cached"] is True and "20%" in record["rule"]
 
 
 def test_chunk_sizes_cover_every_job_and_respect_the_caps():
