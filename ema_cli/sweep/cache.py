@@ -59,8 +59,9 @@ SCHEMA = (
 )
 SIGNALS_MAX_SHARE = 0.2  # cache a job's signals only if storing them costs <= this share of
 # computing the job (so a re-run that reads them saves at least 5x what storing them cost) [-]
-STORE_BYTES_PER_S = 1.0e9  # storing signals (.npy write + CRC-32 of each row), one thread: 1.8
-# GB/s alone, 0.9 GB/s beside the signals.parquet writer (1,000-job bench, 2 cores) [bytes/s]
+STORE_BYTES_PER_S = 0.6e9  # what storing signals costs a sweep: the bench's 136 MB (every 1e-3
+# s) made it 0.23 s longer (paired runs, 2 cores; .npy writes + CRC-32 in a thread of their own,
+# 0.55 s there: fresh page cache takes 0.4 GB/s on the bench VM, 1.8 GB/s once recycled) [B/s]
 KERNEL_CPU_S_PER_STEP = 22e-9  # kernel time per job and integration step on one core: 1.1 s
 # for the bench's 1,000 jobs x 1e5 steps on 2 threads (AMD EPYC; a nonlinearity adds ~10 %) [s]
 SignalRow = tuple[str, int, int, int]
@@ -109,8 +110,10 @@ def signals_rule(n_steps: int, n_out: int, workers: int = 1) -> SignalsRule:
     The estimate uses measured constants (:data:`STORE_BYTES_PER_S`,
     :data:`KERNEL_CPU_S_PER_STEP`); it depends only on the plan and the worker count, so the
     same sweep makes the same decision every time. Both sides scale with the samples per step:
-    on 2 workers, signals recorded every 62 or more integration steps are cached (the bench's
-    1e-3 s at dt 1e-5 s: 100 steps, estimated 12 %), denser ones are not (1e-4 s: 124 %).
+    on 2 workers, signals recorded every 104 or more integration steps are cached (every 2e-3 s
+    at dt 1e-5 s: estimated 10 %); the bench's 1e-3 s (100 steps) is just past the line (21 %:
+    the measured cost, 0.23 s of 1.1 s) and 1e-4 s far past it (206 %). On 1 worker, whose
+    re-run would take twice as long, 52 steps suffice.
     """
     nbytes = n_out * N_SIGNALS * 8
     store = nbytes / STORE_BYTES_PER_S

@@ -9,9 +9,10 @@ point of ``ema sweep`` and of the paper reproduction) through the ``on_start`` /
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -334,9 +335,18 @@ def compute_sweep(
         cache.store(keys, res.metrics, res.signals if cache_signals else None, plan.dec)
         return time.perf_counter() - ts
 
+    def settle() -> None:
+        """Wait for the chunk being stored in the background (re-raises a cache error)."""
+        if storing:
+            timings["store"] += storing.pop().result()
+
     def on_chunk(i: int, res: ChunkOutput) -> None:
-        """A chunk finished: store it in the cache and hand its signals on, concurrently (both
-        spend their time in GIL-free file writes, CRCs and encoders), then record its jobs."""
+        """A chunk finished: record its jobs, store it in the cache and hand its signals on.
+
+        With signals to cache, the store runs in a thread of its own while the signals are
+        handed on and the next chunk computes; it is waited for when the next chunk finishes
+        (one in flight) and at the end. Its jobs count as computed at once.
+        """
         nonlocal computed
         ts = time.perf_counter()
         keys = chunk_keys[i]
@@ -348,18 +358,14 @@ def compute_sweep(
                     status[idx] = FAILED
                     errors[idx] = res.error or "no result"
         else:
-            stored = None
             if keep_signals and not cache_signals and res.signals is not None and plan.dec > 0:
                 memory.update((key, res.signals[r]) for r, key in enumerate(keys))
-            if pool is not None:  # beside the signals writer: both spend their time off the GIL
-                stored = pool.submit(store, keys, res)
+            if pool is not None:
+                settle()
+                storing.append(pool.submit(store, keys, res))
             elif cache is not None:
                 timings["store"] += store(keys, res)
-            try:
-                hand_on(keys, res.signals)
-            finally:
-                if stored is not None:
-                    timings["store"] += stored.result()  # waits; re-raises a cache error
+            hand_on(keys, res.signals)
             for r, key in enumerate(keys):
                 finish(key, res.metrics[r])
             computed += len(keys)
@@ -370,10 +376,11 @@ def compute_sweep(
     done_chunks: set[int] = set()
     bar = _Progress(0, False, "")
     pool: ThreadPoolExecutor | None = None
+    storing: list[Future[float]] = []  # the chunk being stored in the background (one at most)
     interrupted = aborted = False
     try:
         cache = JobCache(cache_dir) if cache_dir is not None else None
-        if cache is not None and on_signals is not None and cache_signals:
+        if cache is not None and cache_signals:
             pool = ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
         t0 = time.perf_counter()
         pending = _lookup(cache, by_key, force, plan.dec, n_out, finish, hand_on)
@@ -397,6 +404,9 @@ def compute_sweep(
             try:
                 execute(chunks, plan.signal, plan.dt, plan.n_steps, plan.dec, backend, workers,
                         on_chunk, scheduler)
+                tw = time.perf_counter()
+                settle()
+                timings["writes"] += time.perf_counter() - tw
             except (KeyboardInterrupt, EmaError):
                 raise
             except Exception as exc:  # a worker died: unfinished chunks are marked failed
@@ -416,7 +426,9 @@ def compute_sweep(
         aborted = True
         raise
     finally:
-        if pool is not None:
+        if pool is not None:  # an aborted sweep: the chunk being stored is finished first
+            with contextlib.suppress(Exception):
+                settle()
             pool.shutdown()
         result = SweepResult(plan, metrics_frame(plan, metrics, status, errors), None, cache,
                              backend, workers, computed=computed, cached=cached,
