@@ -82,6 +82,14 @@ def bench_config(record: float | None = None) -> StudyConfig:
     }, "bench")
 
 
+def _cpu() -> float:
+    """CPU seconds this process has used, every thread (user + system)."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def _size(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
 
@@ -95,12 +103,12 @@ def run_once(backend: str, workers: int, record: float | None = None,
     """
     cfg = bench_config(record)
     if nothing:
-        t0 = time.perf_counter()
+        c0, t0 = _cpu(), time.perf_counter()
         res = compute_sweep(cfg, workers, backend, progress=False, keep_signals=False)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, _cpu() - c0
         parallel = 1 if res.backend in ("threads", "serial") else workers
-        return {"wall": wall, "kernel": res.timings["kernel"] / parallel}
-    t0 = time.perf_counter()
+        return {"wall": wall, "kernel": res.timings["kernel"] / parallel, "cpu": cpu}
+    c0, t0 = _cpu(), time.perf_counter()
     if record is not None:  # what signals.parquet costs first: pyarrow's import, counted apart
         import pyarrow.parquet  # noqa: F401
     imports = time.perf_counter() - t0
@@ -109,6 +117,7 @@ def run_once(backend: str, workers: int, record: float | None = None,
         res = run_sweep(cfg, Path(tmp) / "out", n_jobs=workers, backend=backend,
                         progress=False, cache_dir=Path(tmp) / "cache")
         wall = time.perf_counter() - t0 + imports
+        cpu = _cpu() - c0
         size = res.signals_file.stat().st_size if res.signals_file is not None else 0
         cache_bytes = _size(Path(tmp) / "cache" / "signals")
     counts = res.counts()
@@ -119,7 +128,7 @@ def run_once(backend: str, workers: int, record: float | None = None,
     kernel = t["kernel"] / parallel  # kernel wall: summed chunk times / concurrent workers
     outputs = t.get("outputs", 0.0)
     named = t["plan"] + t["lookup"] + t["warm"] + t["writes"] + outputs + imports
-    return {"wall": wall, "pyarrow_import": imports, "kernel": kernel,
+    return {"wall": wall, "cpu": cpu, "pyarrow_import": imports, "kernel": kernel,
             "overhead": wall - kernel, "plan": t["plan"], "lookup": t["lookup"],
             "warm": t["warm"], "store": t["store"],
             "signals": t["signals"], "outputs": outputs, "writing": t["signals"] + outputs,
@@ -229,12 +238,15 @@ def recording_bench(repeats: int, workers: int, interval: float,
         refs.append(_run_fresh(RECORDING_BACKEND, workers, interval, nothing=True))
     med = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
     cost = statistics.median(r["wall"] - q["wall"] for r, q in zip(runs, refs, strict=True))
+    cpu_cost = statistics.median(r["cpu"] - q["cpu"] for r, q in zip(runs, refs, strict=True))
+    ref_cpu = statistics.median(q["cpu"] for q in refs)
     ref_kernel = statistics.median(q["kernel"] for q in refs)
     ref_wall = statistics.median(q["wall"] for q in refs)
     share, all_share = med["writing"] / med["kernel"], med["all_writes"] / med["kernel"]
     cost_share = cost / ref_kernel
     written = med["parquet_bytes"] + med["cache_bytes"]
-    med.update(writing_share=share, all_writes_share=all_share, wall_cost=cost,
+    med.update(cpu_cost=cpu_cost, cpu_cost_share=cpu_cost / ref_cpu,
+               writing_share=share, all_writes_share=all_share, wall_cost=cost,
                wall_cost_share=cost_share, nothing_wall=ref_wall, nothing_kernel=ref_kernel,
                bytes_written=written)
     cached = "the job cache stores them too" if med["signals_cached"] else \
@@ -253,6 +265,9 @@ def recording_bench(repeats: int, workers: int, interval: float,
           f"writing nothing (median of paired runs; includes what the writer threads take from "
           f"the kernel, the output folder and cache set-up and pyarrow's import, "
           f"{med['pyarrow_import']:.2f} s)  {label}{_verdict(cost_share) if judged else ''}")
+    print(f"  CPU cost       {cpu_cost:+5.2f} CPU-s = {cpu_cost / ref_cpu:5.1%} of the CPU time "
+          f"of the same sweep writing nothing ({ref_cpu:.2f} CPU-s, nearly all kernel; paired "
+          "runs; barely moved by a neighbour's load, unlike the wall times)")
     if disk:
         seconds = max(med["all_writes"], 1e-9)
         fresh, recycled = (med["parquet_bytes"] / disk[k] for k in ("fresh", "recycled"))
