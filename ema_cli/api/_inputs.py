@@ -23,15 +23,30 @@ def override_pairs(overrides: Overrides, nl: Mapping[str, Any] | None = None
         pairs: list[tuple[str, Any]] = []
     elif isinstance(overrides, Mapping):
         pairs = [(str(k), v) for k, v in overrides.items()]
+    elif isinstance(overrides, str | bytes) or not hasattr(overrides, "__iter__"):
+        raise EmaError(f"overrides: expected a dict or (path, value) pairs, got "
+                       f"{type(overrides).__name__}")
     else:
         pairs = []
         for item in overrides:
             if not (isinstance(item, tuple | list) and len(item) == 2):
                 raise EmaError(f"overrides: expected (path, value) pairs, got {item!r}")
             pairs.append((str(item[0]), item[1]))
+    if nl is not None and not isinstance(nl, Mapping):
+        raise EmaError(f"nl: expected a mapping of nonlinearity names to magnitudes, got "
+                       f"{type(nl).__name__}")
     for name, value in (nl or {}).items():
         pairs.append((f"nonlinearities.{name}", value))
     return pairs
+
+
+def folder_arg(folder: object) -> Path | None:
+    """A ``save(folder)`` argument -> Path (None: a new folder under results/)."""
+    if folder is None:
+        return None
+    if not isinstance(folder, str | Path):
+        raise EmaError(f"folder: expected a path, got {type(folder).__name__}")
+    return Path(folder)
 
 
 def base_dir(config: ConfigSource) -> Path | None:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ema_cli.api._inputs import ConfigSource, Overrides, override_pairs
+from ema_cli.api._inputs import ConfigSource, Overrides, folder_arg, override_pairs
 from ema_cli.errors import EmaError
 
 if TYPE_CHECKING:
@@ -88,7 +88,7 @@ class Identification:
 
         settings = self.result.settings.model_dump(mode="json")
         out, _ = prepare_output("identify", "identify", content_hash(settings, 16),
-                                Path(folder) if folder is not None else None)
+                                folder_arg(folder))
         write_identification(self.result, out, command="identify")
         finish_output(out)
         return out

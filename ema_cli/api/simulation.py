@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, override_pairs
+from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
 from ema_cli.errors import EmaError
 from ema_cli.sim.tables import METRICS, SIGNALS
 
@@ -142,7 +142,7 @@ class Simulation:
         cfg_json = self.config.model_dump(mode="json")
         out, _ = prepare_output("simulate", self.config.name,
                                 content_hash({"cfg": cfg_json}, 16),
-                                Path(folder) if folder is not None else None)
+                                folder_arg(folder))
         timings = dict(self.timings)
         table = self.table() if self.batch.signals is not None else None
         if worker is not None:

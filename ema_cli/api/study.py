@@ -6,7 +6,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, override_pairs, source_name
+from ema_cli.api._inputs import (
+    ConfigSource,
+    Overrides,
+    base_dir,
+    folder_arg,
+    override_pairs,
+    source_name,
+)
 from ema_cli.api.simulation import signal_column
 from ema_cli.errors import EmaError
 
@@ -55,6 +62,12 @@ class Sweep:
         from ema_cli.sim.tables import SIGNALS
 
         col = signal_column(name)
+        if isinstance(job, bool) or not isinstance(job, str | int):
+            raise EmaError(f"job: expected a job id such as {self.jobs[0]!r} or an index, got "
+                           f"{job!r}")
+        if isinstance(job, int) and not 0 <= job < len(self.jobs):
+            raise EmaError(f"job index {job} is out of range: this sweep has {len(self.jobs)} "
+                           f"jobs (0..{len(self.jobs) - 1})")
         try:
             sig = self.result.signals(job)
         except KeyError as exc:
@@ -103,7 +116,7 @@ class Sweep:
         manifest) -> the folder (new or empty if given)."""
         from ema_cli.report.sweep_report import save_sweep
 
-        return save_sweep(self.result, Path(folder) if folder is not None else None,
+        return save_sweep(self.result, folder_arg(folder),
                           self.overrides)
 
 

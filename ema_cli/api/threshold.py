@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, override_pairs
+from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
 from ema_cli.errors import EmaError
 
 if TYPE_CHECKING:
@@ -94,7 +94,7 @@ class Threshold:
         summary = self.summary
         out, _ = prepare_output("threshold", f"threshold-{self.config.name}",
                                 content_hash({"cfg": cfg_json, "s": summary}, 16),
-                                Path(folder) if folder is not None else None)
+                                folder_arg(folder))
         write_threshold(out, yaml.safe_dump(cfg_json, sort_keys=False), self.result,
                         self.criteria, summary, f"{self.vary} [{self.unit}]", self.title,
                         self.log, {"seed": self.config.seed, "wall_time_s": self.wall_time_s,
@@ -132,11 +132,17 @@ def threshold(
     from ema_cli.config.study import StudyConfig
     from ema_cli.model.nonlinearities import lookup
 
-    criteria = [Criterion.parse(r) for r in require]
+    if isinstance(require, str):
+        require = [require]
+    criteria = [Criterion.parse(str(r)) for r in require]
     if metric is not None or limit is not None:
         if metric is None or limit is None:
             raise EmaError("--metric and --limit go together")
-        crit = Criterion(metric, "<=", float(limit))
+        try:
+            limit = float(limit)
+        except (TypeError, ValueError):
+            raise EmaError(f"--limit must be a number, got {limit!r}") from None
+        crit = Criterion(str(metric), "<=", limit)
         crit.check()
         criteria.insert(0, crit)
     if not criteria:
@@ -147,7 +153,10 @@ def threshold(
     rtol = DEFAULT_RTOL if rtol is None else float(rtol)
     if not (math.isfinite(rtol) and 0 < rtol < 1):
         raise EmaError(f"--rtol must be a number in (0, 1), got {rtol}")
-    lo, hi = (float(x) for x in range)
+    try:
+        lo, hi = (float(x) for x in range)
+    except (TypeError, ValueError):
+        raise EmaError(f"--range must be two numbers LO HI, got {range!r}") from None
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise EmaError(f"--range must be two finite numbers, got {lo} {hi}")
     if not lo < hi:
@@ -160,6 +169,14 @@ def threshold(
     pl = lookup(vary)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    from ema_cli.model.nonlinearities import nonlinearity_updates
+    from ema_cli.model.params import resolve
+
+    both = sorted(set(nonlinearity_updates(vary, hi, resolve(), cfg.friction_reading))
+                  & set(cfg.plant))
+    if both:
+        raise EmaError(f"--vary {vary} and plant.{both[0]} set the same model parameter; "
+                       "remove plant." + both[0])
     signal = input_signal(cfg.input, base_dir(config), cfg.load)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != vary}
     ev = simulation_evaluator(vary, cfg.plant_overrides(), nls, signal, cfg.simulation.duration_s,

@@ -21,6 +21,14 @@ err_console = Console(stderr=True, highlight=False, soft_wrap=True)
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def printable(text: str) -> str:
+    """``text`` as one printable line: control characters (from a binary file quoted in a
+    message) shown as ``?``, line breaks as spaces."""
+    import re
+
+    return re.sub(r"[\x00-\x08\x0b-\x1f\x7f]", "?", " ".join(text.split("\n")))
+
+
 def handle_errors(fn: F) -> F:
     """Turn EmaError (and Ctrl-C) into one clear message and an exit code, never a traceback.
 
@@ -32,7 +40,7 @@ def handle_errors(fn: F) -> F:
         try:
             return fn(*args, **kwargs)
         except EmaError as exc:
-            err_console.print(f"[bold red]error:[/] {escape(exc.message)}")
+            err_console.print(f"[bold red]error:[/] {escape(printable(exc.message))}")
             raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt:
             err_console.print("[yellow]interrupted[/]: finished work was kept")

@@ -60,21 +60,57 @@ LLVM and matplotlib takes ~0.45 s and does nothing these commands need; commands
 worker pools (sweep, identify, reproduce) exit normally so that the pools are shut down."""
 
 
+def _terminate(signum: int, frame: object) -> None:
+    """SIGTERM: stop like Ctrl-C (finished work kept, temporary files removed)."""
+    raise KeyboardInterrupt
+
+
+def run(args: list[str] | None = None) -> int:
+    """Run the command line -> exit code. Usage errors (a bad option value, an unknown option
+    or command) are one line, ``error: ...``, exit code 2, as every other bad input."""
+    try:
+        from typer._click import exceptions as click_errors  # typer's own click
+    except ImportError:  # a typer that uses click itself
+        import click.exceptions as click_errors  # type: ignore[no-redef]
+
+    try:
+        result = app(args=args, standalone_mode=False)
+    except click_errors.NoArgsIsHelpError as exc:  # `ema` alone: the help
+        typer.echo(exc.format_message())
+        return 0
+    except click_errors.UsageError as exc:
+        ctx = exc.ctx
+        hint = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
+        message = " ".join(exc.format_message().split())
+        typer.echo(f"error: {message}{hint}", err=True)
+        return 2
+    except click_errors.ClickException as exc:
+        typer.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
+        return exc.exit_code
+    except typer.Exit as exc:
+        return exc.exit_code
+    except typer.Abort:
+        typer.echo("interrupted", err=True)
+        return 130
+    return result if isinstance(result, int) else 0
+
+
 def main() -> None:
     """Console-script entry point."""
     import os
+    import signal
     import sys
+    import warnings
 
+    signal.signal(signal.SIGTERM, _terminate)
+    # numpy overflow warnings and matplotlib layout advice are not for the user of a command:
+    # what matters is reported (divergence, limits) in the command's own words
+    warnings.simplefilter("ignore", RuntimeWarning)
+    warnings.filterwarnings("ignore", category=UserWarning, module="matplotlib")
     command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
-    try:
-        app()
-    except SystemExit as exc:
-        if command not in FAST_EXIT or "pytest" in sys.modules:
-            raise
-        code = exc.code
-        if code is not None and not isinstance(code, int):
-            print(code, file=sys.stderr)
-            code = 1
+    code = run(sys.argv[1:])
+    if command in FAST_EXIT:
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(code or 0)
+        os._exit(code)
+    sys.exit(code)

@@ -87,7 +87,7 @@ def simulate_cmd(
     out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
 ) -> None:
     """Simulate one configuration and write timeseries.csv, metrics.csv, manifest.json and
-    tracking.png."""
+    tracking.png. Exits 1 if the run diverged (its outputs are still written)."""
     import time
 
     from ema_cli.report import figure_worker
@@ -103,12 +103,12 @@ def simulate_cmd(
         raise
     row = run.summary
     console.print(metrics_table(row, run.title))
-    if run.diverged:
-        err_console.print(f"[bold red]diverged[/] at t = {row['t_end_s']:.4g} s "
-                          "(non-finite or runaway state); try a smaller --dt")
     kernel = run.timings["simulation"]
     console.print(f"{run.batch.n_steps:,} steps in {kernel * 1e3:.1f} ms "
                   f"(total {time.perf_counter() - t_start:.2f} s) -> {folder}")
+    if run.diverged:  # the outputs are written; the exit code says the run failed
+        raise EmaError(f"the run diverged at t = {row['t_end_s']:.4g} s (a non-finite or "
+                       "runaway state): try a smaller --dt, or check the parameters", 1)
 
 
 def _simulate(config: Path | None, step: float | None, duration: float | None,

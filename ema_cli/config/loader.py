@@ -167,7 +167,7 @@ def parse_value(text: str) -> Any:
     """A command-line value -> YAML scalar (``1e-5`` -> float, ``off`` stays 'off', lists)."""
     try:
         value = yaml.safe_load(text)
-    except yaml.YAMLError:
+    except (yaml.YAMLError, ValueError):  # ValueError: an integer of > 4300 digits
         return text
     if isinstance(value, bool):  # YAML reads off/on as booleans; keep the words
         return text
@@ -224,6 +224,9 @@ def apply_overrides(
                 node[k] = value
             else:
                 if node.get(k) is None:
+                    if keys[depth + 1].isdigit():
+                        raise EmaError(f"--set {path}: '{'.'.join(keys[:depth + 1])}' is not "
+                                       "in the config, so it has no item to index")
                     node[k] = {}
                 node = node[k]
     return out
@@ -248,6 +251,9 @@ def validate(model: type[M], data: Mapping[str, Any], source: str) -> M:
     """
     try:
         return model.model_validate(data)
+    except (ArithmeticError, RecursionError) as exc:  # e.g. 1e308**2 inside a validator
+        raise EmaError(f"{source}: a value is out of range ({_one_line(str(exc))}); use "
+                       "physically sensible magnitudes") from None
     except ValidationError as exc:
         by_key: dict[str, list[str]] = {}
         for err in exc.errors():
@@ -295,10 +301,16 @@ def load_config(
     elif isinstance(source, Mapping):
         data = dict(source)
         where = "dict"
-    else:
+    elif isinstance(source, str | Path):
         data = read_yaml(source)
         where = str(source)
-    data = apply_overrides(data, overrides, list(model.model_fields))
+    else:
+        raise EmaError(f"config: expected a YAML file path, a dict, a config model or None, got "
+                       f"{type(source).__name__}")
+    try:
+        data = apply_overrides(data, overrides, list(model.model_fields))
+    except RecursionError:
+        raise EmaError(f"{where}: the config refers to itself or is nested too deeply") from None
     return validate(model, data, where)
 
 
@@ -322,9 +334,13 @@ def resolve_params(
     applied, so a stiffness change keeps the damping ratio, unless the user set them.
     """
     raw: dict[str, Any] = dict(plant)
-    base = resolve(raw)
-    raw.update(combined_updates(nonlinearities, base, friction_reading))
-    return resolve(raw)
+    try:
+        base = resolve(raw)
+        raw.update(combined_updates(nonlinearities, base, friction_reading))
+        return resolve(raw)
+    except ArithmeticError as exc:  # derived values overflow (e.g. m = 1e308: m**2)
+        raise EmaError(f"the parameters are out of range ({_one_line(str(exc))}); use "
+                       "physically sensible magnitudes in plant and nonlinearities") from None
 
 
 def _local(path: str, base_dir: Path | None) -> Path:

@@ -24,15 +24,15 @@ from ema_cli.config.base import (
     Strict,
 )
 from ema_cli.errors import EmaError
-from ema_cli.model.nonlinearities import check_distinct, lookup
-from ema_cli.model.params import check_value
+from ema_cli.model.nonlinearities import check_distinct, lookup, nonlinearity_updates
+from ema_cli.model.params import check_value, resolve
 from ema_cli.sim.grid import DEFAULT_DT, DEFAULT_OUTPUT_INTERVAL, off_grid, plan_steps
 from ema_cli.units import RPM
 
 Scalar = float | int | str
 
 
-def _reraise(exc: EmaError, key: str | None = None) -> ValueError:
+def as_value_error(exc: EmaError, key: str | None = None) -> ValueError:
     """An EmaError as a pydantic ValueError; ``key`` (a dict key) is folded into the key path."""
     return ValueError(f"{KEY_MARK}{key}{KEY_MARK}{exc.message}" if key else exc.message)
 
@@ -75,15 +75,16 @@ class SimulationConfig(Strict):
 
     duration_s: PositiveFloat = Field(1.0, description="simulated time [s]")
     dt_s: PositiveFloat = Field(DEFAULT_DT, description="integration step [s]")
-    output_interval_s: PositiveFloat = Field(
-        DEFAULT_OUTPUT_INTERVAL, description="interval of the recorded time series [s]")
+    output_interval_s: PositiveFloat | None = Field(
+        DEFAULT_OUTPUT_INTERVAL, description="interval of the recorded time series [s]; null: "
+                                             "record nothing (metrics only)")
 
     @model_validator(mode="after")
     def _grid(self) -> SimulationConfig:
         try:
             plan_steps(self.duration_s, self.dt_s, self.output_interval_s)
         except EmaError as exc:
-            raise _reraise(exc) from None
+            raise as_value_error(exc) from None
         return self
 
 
@@ -92,7 +93,7 @@ def _check_plant(values: dict[str, Any]) -> dict[str, Any]:
         try:
             check_value(name, value)
         except EmaError as exc:
-            raise _reraise(exc, name) from None
+            raise as_value_error(exc, name) from None
     return values
 
 
@@ -101,19 +102,19 @@ def _check_nonlinearities(values: dict[str, Any]) -> dict[str, Any]:
         try:
             lookup(name)
         except EmaError as exc:
-            raise _reraise(exc, name) from None
+            raise as_value_error(exc, name) from None
         if isinstance(value, str) and value.strip().lower() != "off":
             try:
                 float(value)
             except ValueError:
-                raise _reraise(EmaError(f"expects a number or 'off', got {value!r}"),
+                raise as_value_error(EmaError(f"expects a number or 'off', got {value!r}"),
                                name) from None
         if not isinstance(value, str) and (not math.isfinite(float(value)) or value < 0):
-            raise _reraise(EmaError(f"must be a finite number >= 0, got {value!r}"), name)
+            raise as_value_error(EmaError(f"must be a finite number >= 0, got {value!r}"), name)
     try:
         check_distinct(values)  # one setting per placement (deadzone2 = deadzone@transmission)
     except EmaError as exc:
-        raise _reraise(exc) from None
+        raise as_value_error(exc) from None
     return values
 
 
@@ -196,7 +197,7 @@ class RunConfig(Strict):
             data = dict(data)
             for key in ("plant", "nonlinearities"):
                 if isinstance(data.get(key), dict):
-                    data[key] = _bools_to_words(data[key])
+                    data[key] = bools_to_words(data[key])
         return data
 
     def section_params(self) -> dict[str, float]:
@@ -243,9 +244,16 @@ class RunConfig(Strict):
     def _sections(self) -> RunConfig:
         for path, param in SECTION_PARAMS.items():
             section, key = path.split(".")
-            if param in self.plant and getattr(getattr(self, section), key) not in (None, 0.0,
-                                                                                     False):
+            part = getattr(self, section)
+            if param in self.plant and (key in part.model_fields_set
+                                        or getattr(part, key) not in (None, 0.0, False)):
                 raise ValueError(f"{path} and plant.{param} set the same parameter; give one")
+        for name, value in self.nonlinearities.items():  # a magnitude and plant.X of one param
+            written = nonlinearity_updates(name, value, resolve(), self.friction_reading)
+            both = sorted(set(written) & set(self.plant))
+            if both:
+                raise ValueError(f"nonlinearities.{name} and plant.{both[0]} set the same "
+                                 "model parameter; give one")
         # plant.Ts has passed check_value already (field validators run first)
         key = "plant.Ts" if "Ts" in self.plant else "controller.sample_time_s"
         ts = float(check_value("Ts", self.plant_overrides().get("Ts", 0.0)))
@@ -273,12 +281,12 @@ class RunConfig(Strict):
         return _check_nonlinearities(v)
 
 
-def _bools_to_words(value: Any) -> Any:
+def bools_to_words(value: Any) -> Any:
     """YAML 1.1 reads unquoted off/on as booleans: turn them back into the words."""
     if isinstance(value, bool):
         return "on" if value else "off"
     if isinstance(value, list):
-        return [_bools_to_words(v) for v in value]
+        return [bools_to_words(v) for v in value]
     if isinstance(value, dict):
-        return {k: _bools_to_words(v) for k, v in value.items()}
+        return {k: bools_to_words(v) for k, v in value.items()}
     return value

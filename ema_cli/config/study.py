@@ -15,7 +15,7 @@ from ema_cli.config.base import (
     PositiveInt,
     Strict,
 )
-from ema_cli.config.run import RunConfig, Scalar, _bools_to_words, _reraise
+from ema_cli.config.run import RunConfig, Scalar, as_value_error, bools_to_words
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import lookup, nonlinearity_updates
 from ema_cli.model.params import INDEX, check_value, resolve
@@ -85,7 +85,7 @@ class SweepAxis(Strict):
     @field_validator("values", mode="before")
     @classmethod
     def _words(cls, v: Any) -> Any:
-        return _bools_to_words(v)
+        return bools_to_words(v)
 
     @property
     def targets(self) -> tuple[str, ...]:
@@ -148,7 +148,7 @@ class SweepAxis(Strict):
             raise ValueError("give the axis values with exactly one of 'values', 'linspace' "
                              f"or 'logspace' (got {given or 'none'})")
         if self.logspace is not None and (self.logspace.start <= 0 or self.logspace.stop <= 0):
-            raise _reraise(EmaError("start and stop must be > 0 for a logarithmic axis, got "
+            raise as_value_error(EmaError("start and stop must be > 0 for a logarithmic axis, got "
                                     f"{self.logspace.start}, {self.logspace.stop}"), "logspace")
         if self.parameter is not None:
             self._check_parameter()
@@ -158,52 +158,52 @@ class SweepAxis(Strict):
 
     def _check_parameter(self) -> None:
         if self.parameter not in INDEX:
-            raise _reraise(EmaError(f"unknown model parameter '{self.parameter}'; expected one "
-                                    f"of: {', '.join(INDEX)}"), "parameter")
+            raise as_value_error(EmaError(f"unknown model parameter '{self.parameter}'; "
+                                          f"expected one of: {', '.join(INDEX)}"), "parameter")
         if isinstance(self.values, dict):
-            raise _reraise(EmaError("a parameter axis takes a list of values"), "values")
+            raise as_value_error(EmaError("a parameter axis takes a list of values"), "values")
         if self.relative:
-            raise _reraise(EmaError("only dead-zone axes can be relative"), "relative")
+            raise as_value_error(EmaError("only dead-zone axes can be relative"), "relative")
         values = self.value_list()
         if not values:
-            raise _reraise(EmaError("empty sweep: the axis has no values"), "values")
+            raise as_value_error(EmaError("empty sweep: the axis has no values"), "values")
         for k, v in enumerate(values):
             try:
                 check_value(self.parameter, v)  # type: ignore[arg-type]
             except EmaError as exc:
-                raise _reraise(exc, f"values.{k}") from None
+                raise as_value_error(exc, f"values.{k}") from None
 
     def _check_nonlinearities(self) -> None:
         names = list(self.targets)
         if not names:
-            raise _reraise(EmaError("empty sweep: no nonlinearity listed"), "nonlinearity")
+            raise as_value_error(EmaError("empty sweep: no nonlinearity listed"), "nonlinearity")
         for k, name in enumerate(names):
             try:
                 lookup(name)
             except EmaError as exc:
-                raise _reraise(exc, "nonlinearity" if not self.is_placement_axis
+                raise as_value_error(exc, "nonlinearity" if not self.is_placement_axis
                                else f"nonlinearity.{k}") from None
         keys = [f"{lookup(n).type}@{lookup(n).location}" for n in names]
         if len(set(keys)) != len(keys):
-            raise _reraise(EmaError(f"a placement is listed twice: {names}"), "nonlinearity")
+            raise as_value_error(EmaError(f"a placement is listed twice: {names}"), "nonlinearity")
         if isinstance(self.values, dict):
             if not self.is_placement_axis:
-                raise _reraise(EmaError("a mapping of values needs a list of nonlinearities"),
+                raise as_value_error(EmaError("a mapping of values needs a list of nonlinearities"),
                                "values")
             if set(self.values) != set(names):
-                raise _reraise(EmaError(
+                raise as_value_error(EmaError(
                     f"the mapping must give values for exactly {names}, got {list(self.values)}"),
                     "values")
         base = resolve()
         for name in names:
             pl = lookup(name)
             if self.relative and pl.type not in RELATIVE_TYPES:
-                raise _reraise(EmaError(
+                raise as_value_error(EmaError(
                     f"only dead zones can be relative; '{name}' is a {pl.type}"), "relative")
             values = self.value_list(name)
             where = f"values.{name}" if isinstance(self.values, dict) else "values"
             if not values:
-                raise _reraise(EmaError("empty sweep: the axis has no values"), where)
+                raise as_value_error(EmaError("empty sweep: the axis has no values"), where)
             for k, v in enumerate(values):
                 try:
                     if self.relative:
@@ -212,7 +212,7 @@ class SweepAxis(Strict):
                     else:
                         nonlinearity_updates(name, v, base)
                 except EmaError as exc:
-                    raise _reraise(exc, f"{where}.{k}") from None
+                    raise as_value_error(exc, f"{where}.{k}") from None
 
 
 class SweepConfig(Strict):
@@ -236,16 +236,16 @@ class SweepConfig(Strict):
             for t in axis.targets:
                 key = t if axis.parameter else f"{lookup(t).type}@{lookup(t).location}"
                 if key in seen:
-                    raise _reraise(EmaError(f"'{t}' is swept by axes {seen[key]} and {k}"),
+                    raise as_value_error(EmaError(f"'{t}' is swept by axes {seen[key]} and {k}"),
                                    f"axes.{k}")
                 seen[key] = k
             if axis.label in names:
-                raise _reraise(EmaError(f"two axes are named '{axis.label}'; set 'name'"),
+                raise as_value_error(EmaError(f"two axes are named '{axis.label}'; set 'name'"),
                                f"axes.{k}.name")
             names.add(axis.label)
         if self.mode == "zip" and len({a.n_points() for a in self.axes}) > 1:
             counts = [a.n_points() for a in self.axes]
-            raise _reraise(EmaError(f"zip needs axes of equal length, got {counts} points"),
+            raise as_value_error(EmaError(f"zip needs axes of equal length, got {counts} points"),
                            "axes")
         return self
 
@@ -283,7 +283,7 @@ class OutputsConfig(Strict):
     def _metrics(cls, v: list[str]) -> list[str]:
         for k, name in enumerate(v):
             if name not in METRIC_BY_EDGE:
-                raise _reraise(EmaError(f"unknown metric '{name}'; expected one of "
+                raise as_value_error(EmaError(f"unknown metric '{name}'; expected one of "
                                         f"{', '.join(METRIC_BY_EDGE)}"), str(k))
         return v
 

@@ -157,7 +157,19 @@ class SyntheticSettings(Strict):
             raise ValueError(f"sample_interval_s ({self.sample_interval_s:g} s) must lie "
                              f"between dt_s ({self.dt_s:g} s) and duration_s "
                              f"({self.duration_s:g} s)")
+        steps = self.duration_s / self.dt_s
+        if steps > MAX_SYNTHETIC_STEPS:
+            raise ValueError(f"duration_s / dt_s = {steps:.3g} steps; synthetic data is "
+                             f"limited to {MAX_SYNTHETIC_STEPS:,} steps")
+        from ema_cli.sim.grid import off_grid
+
+        if off_grid(self.sample_interval_s, self.dt_s):
+            raise ValueError(f"sample_interval_s ({self.sample_interval_s:g} s) must be a whole "
+                             f"multiple of dt_s ({self.dt_s:g} s)")
         return self
+
+
+MAX_SYNTHETIC_STEPS = 100_000_000  # integration steps of synthetic data at most [steps]
 
 
 class IdentifySettings(Strict):

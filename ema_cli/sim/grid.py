@@ -28,7 +28,10 @@ def plan_steps(duration: float, dt: float, output_interval: float | None) -> tup
         raise EmaError(f"duration must be a positive number of seconds, got {duration}")
     if dt > duration:
         raise EmaError(f"dt ({dt} s) must not exceed the duration ({duration} s)")
-    n_steps = round(duration / dt)
+    ratio = duration / dt
+    if not math.isfinite(ratio) or ratio > MAX_STEPS:
+        raise EmaError(f"duration / dt = {ratio:.3g} steps is too many; at most {MAX_STEPS:,}")
+    n_steps = round(ratio)
     if abs(n_steps * dt - duration) > 1e-9 * duration:
         raise EmaError(f"the duration ({duration} s) must be a whole number of steps dt = {dt} s")
     if n_steps > MAX_STEPS:
@@ -38,6 +41,9 @@ def plan_steps(duration: float, dt: float, output_interval: float | None) -> tup
     if not (math.isfinite(output_interval) and output_interval > 0):
         raise EmaError(
             f"output interval must be a positive number of seconds, got {output_interval}")
+    if output_interval > duration:
+        raise EmaError(f"the output interval ({output_interval:g} s) must not exceed the "
+                       f"duration ({duration:g} s)")
     dec = round(output_interval / dt)
     if dec < 1 or abs(dec * dt - output_interval) > 1e-9 * output_interval:
         raise EmaError(
@@ -59,7 +65,7 @@ def resolution_warnings(params: Mapping[str, float], dt: float) -> list[str]:
         if rate * dt > RESOLUTION_LIMIT:
             out.append(
                 f"dt = {dt:g} s may under-resolve the {what} ({rate:.3g} 1/s, "
-                f"rate*dt = {rate * dt:.2f} > {RESOLUTION_LIMIT}); try dt <= "
+                f"rate*dt = {rate * dt:.3g} > {RESOLUTION_LIMIT}); try dt <= "
                 f"{RESOLUTION_LIMIT / rate / 2:.2g} s"
             )
     return out
@@ -69,5 +75,7 @@ def off_grid(ts: np.ndarray | float, dt: float) -> np.ndarray:
     """True where a controller sample time ``ts`` [s] > 0 is not a whole multiple of ``dt``
     (0 is the continuous controller and always fine)."""
     ts = np.asarray(ts, dtype=np.float64)
-    n = ts / dt
-    return (ts > 0) & ((n < 1 - 1e-9) | (np.abs(n - np.round(n)) > 1e-9 * np.maximum(n, 1.0)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        n = ts / dt
+        return (ts > 0) & ((n < 1 - 1e-9) | ~np.isfinite(n)
+                           | (np.abs(n - np.round(n)) > 1e-9 * np.maximum(n, 1.0)))

@@ -206,3 +206,73 @@ def test_validate_names_the_key_of_an_experiment(tmp_path):
     p.write_text("name: e\nstudies: []\nclaims: []\n")
     r = invoke("validate", str(p))
     assert r.exit_code == 2 and "e.yaml" in r.output and "Traceback" not in r.output
+
+
+@pytest.mark.parametrize(("args", "needles"), [
+    (["simulate", "--duration", "1e308"], ["too many"]),
+    (["simulate", "--dt", "1e-320", "--duration", "0.01"], ["too many"]),
+    (["simulate", "--duration", "0.01", "--set", "simulation.output_interval_s=1e308"],
+     ["output interval", "must not exceed"]),
+    (["simulate", "--duration", "0.01", "--set", "plant.m=1e308"], ["out of range"]),
+    (["simulate", "--set", "plant.kL=" + "9" * 5000], ["plant.kL"]),
+    (["simulate", "--nl", "deadzone2=0.01", "--set", "plant.alpha=0.001"],
+     ["nonlinearities.deadzone2", "plant.alpha", "give one"]),
+    (["simulate", "--set", "plant.locked=1", "--set", "motor.locked=false"],
+     ["motor.locked", "plant.locked"]),
+    (["simulate", "--set", "sweep.axes.5.values=[1]"], ["sweep.axes", "not in the config"]),
+    (["identify", "--method", "exact", "--set", "synthetic.duration_s=1e308"],
+     ["synthetic", "steps"]),
+    (["identify", "--method", "exact", "--set", "synthetic.sample_interval_s=1.5e-5"],
+     ["sample_interval_s", "whole multiple"]),
+    (["threshold", CONFIG, "--vary", "deadzone2", "--range", "0.001", "0.1", "--metric",
+      "ss_err_pos_deg", "--limit", "0.1", "--set", "plant.alpha=0.001"],
+     ["--vary deadzone2", "plant.alpha"]),
+])
+def test_values_out_of_range_or_given_twice(tmp_path, args, needles):
+    one_clear_line(invoke(*args, "--out", str(tmp_path / "x")), *needles)
+
+
+def test_a_diverged_simulation_exits_1_with_its_outputs(tmp_path):
+    out = tmp_path / "run"
+    r = invoke("simulate", "--duration", "0.01", "--set", "plant.Kt=1e308", "--out", str(out))
+    assert r.exit_code == 1 and "diverged" in r.output and "Traceback" not in r.output
+    assert (out / "metrics.csv").is_file() and (out / "manifest.json").is_file()
+
+
+def test_recording_can_be_turned_off(tmp_path):
+    out = tmp_path / "run"
+    r = invoke("simulate", "--duration", "0.05", "--set", "simulation.output_interval_s=null",
+               "--out", str(out))
+    assert r.exit_code == 0, r.output
+    names = {p.name for p in out.iterdir()}
+    assert "metrics.csv" in names and "timeseries.csv" not in names
+    assert "tracking.png" not in names
+
+
+@pytest.mark.parametrize(("call", "needle"), [
+    (lambda api: api.simulate(42), "expected a YAML file path"),
+    (lambda api: api.simulate(None, nl=[("deadzone2", 0.1)]), "nl: expected a mapping"),
+    (lambda api: api.simulate(None, "plant.kL=5"), "overrides: expected a dict"),
+    (lambda api: api.threshold(None, "deadzone2", (0.001, 0.01, 0.1), metric="ss_err_pos_deg",
+                               limit=0.1), "--range"),
+    (lambda api: api.threshold(None, "deadzone2", 0.1, metric="ss_err_pos_deg", limit=0.1),
+     "--range"),
+    (lambda api: api.threshold(None, "deadzone2", (0.001, 0.1), metric="ss_err_pos_deg",
+                               limit="abc"), "--limit must be a number"),
+])
+def test_the_api_answers_bad_input_with_ema_errors(call, needle):
+    from ema_cli import api
+    from ema_cli.errors import EmaError
+
+    with pytest.raises(EmaError, match=needle):
+        call(api)
+
+
+def test_the_api_refuses_a_self_referencing_config():
+    from ema_cli import api
+    from ema_cli.errors import EmaError
+
+    d: dict = {"simulation": {"duration_s": 0.01}}
+    d["plant"] = d
+    with pytest.raises(EmaError):
+        api.simulate(d)

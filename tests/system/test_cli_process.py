@@ -41,3 +41,17 @@ def test_exit_codes_and_messages_survive_the_fast_exit(tmp_path):
     assert r.returncode == 2 and "nope.yaml" in r.stderr
     r = ema("--help", cwd=tmp_path)
     assert r.returncode == 0 and "simulate" in r.stdout
+
+
+def test_usage_errors_are_one_line(tmp_path):
+    for args, needle in ((["simulate", "--duration", "abc"], "--duration"),
+                         (["simulate", "--bogus"], "No such option: --bogus"),
+                         (["bogus"], "No such command"),
+                         (["threshold", "x.yaml", "--vary", "deadzone2", "--range", "1"],
+                          "--range")):
+        r = ema(*args, cwd=tmp_path)
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert lines[0].startswith("error:") and needle in lines[0]
+    r = ema(cwd=tmp_path)
+    assert r.returncode == 0 and "Commands" in r.stdout
