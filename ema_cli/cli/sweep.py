@@ -184,6 +184,10 @@ def validate_cmd(
     from ema_cli.sweep.expand import check_size
 
     cfg, _ = _load(config, set_)
+    if not cfg.sweep.axes:  # a run config (`ema simulate`), or a study still without axes
+        console.print(f"{config}: valid run config (no sweep axes: `ema simulate` runs it; "
+                      "`ema sweep` needs sweep.axes)")
+        return
     n = check_size(cfg.sweep, str(config))
     axes = "; ".join(f"{a.label} ({a.n_points()} values)" for a in cfg.sweep.axes)
     console.print(f"{config}: valid; {cfg.sweep.mode} over {axes} -> {n} jobs"

@@ -276,3 +276,10 @@ def test_the_api_refuses_a_self_referencing_config():
     d["plant"] = d
     with pytest.raises(EmaError):
         api.simulate(d)
+
+
+def test_validate_accepts_a_run_config(tmp_path):
+    p = tmp_path / "run.yaml"
+    p.write_text("input:\n  kind: step\n  amplitude_deg: 1\n")
+    r = invoke("validate", str(p))
+    assert r.exit_code == 0 and "valid run config" in " ".join(r.output.split())
