@@ -68,12 +68,17 @@ def load_experiment(path: Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ex
     if exp.identification is not None:
         validate(IdentifySettings, exp.identification.settings,
                  f"{path}: identification.settings")
-    for s in exp.studies:
-        if not (path.parent / s.config).is_file():
-            raise EmaError(f"{path}: study '{s.id}': config '{s.config}' does not exist")
-    for t in exp.thresholds:
-        if not (path.parent / t.config).is_file():
-            raise EmaError(f"{path}: threshold '{t.id}': config '{t.config}' does not exist")
+    checked: set[str] = set()
+    for what, ident, rel in [*(("study", s.id, s.config) for s in exp.studies),
+                             *(("threshold", t.id, t.config) for t in exp.thresholds)]:
+        if not (path.parent / rel).is_file():
+            raise EmaError(f"{path}: {what} '{ident}': config '{rel}' does not exist")
+        if rel not in checked:  # every study config is valid before anything is written
+            checked.add(rel)
+            try:
+                study_config(path, rel)
+            except EmaError as exc:
+                raise EmaError(f"{path}: {what} '{ident}': {exc.message}", exc.exit_code) from None
     return exp
 
 

@@ -63,7 +63,8 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
         log(f"study {s.id}: {cpath}")
         res = run_sweep(cfg, _under(out, "studies", s.id), n_jobs=n_jobs, progress=progress,
                         cache_dir=default_cache_dir(out),  # one cache for every study
-                        base_dir=cpath.parent, source=str(cpath))
+                        base_dir=cpath.parent, source=str(cpath),
+                        reuse_finished=True)  # a resumed run: finished studies are kept
         rep.studies[s.id] = res.metrics
         rep.sweeps[s.id] = res
     rep.timings["studies"] = time.perf_counter() - t0

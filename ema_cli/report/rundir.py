@@ -116,6 +116,28 @@ def _read_marker(folder: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
+def _only_job_cache(path: Path) -> bool:
+    """True if ``path`` (an output folder's ``.cache``) is a folder holding nothing but a job
+    cache's own files (``sweep.cache``: the database, its journal files, ``signals/``)."""
+    from ema_cli.sweep.cache import DB_NAME
+
+    if path.is_symlink() or not path.is_dir():
+        return False
+    names = {DB_NAME, *(f"{DB_NAME}-{s}" for s in ("wal", "shm", "journal")), "signals"}
+    for p in path.iterdir():
+        if p.name not in names or (p.name == "signals") != (p.is_dir() and not p.is_symlink()):
+            return False
+    signals = path / "signals"
+    if signals.is_dir():  # signals/<kk>/<key>-<random>-d<dec>.npy (and their temporaries)
+        for sub in signals.iterdir():
+            if not sub.is_dir() or sub.is_symlink():
+                return False
+            if any(not (f.name.endswith((".npy", ".tmp")) and f.is_file())
+                   for f in sub.iterdir()):
+                return False
+    return True
+
+
 def check_output(out: Path | None, command: str, fingerprint: str | None = None,
                  resume: bool = False) -> bool:
     """Check ``--out`` against the policy of :func:`prepare_output` without creating anything
@@ -127,7 +149,7 @@ def check_output(out: Path | None, command: str, fingerprint: str | None = None,
         raise EmaError(f"--out '{out}' is a file; expected a folder (new or empty)")
     if out.is_dir():
         try:  # a job cache (.cache) alone does not make a folder a result
-            busy = any(p.name != CACHE_NAME for p in out.iterdir())
+            busy = any(p.name != CACHE_NAME or not _only_job_cache(p) for p in out.iterdir())
         except OSError as exc:
             raise EmaError(f"--out '{out}' cannot be read: {exc.strerror}") from None
         if busy:
@@ -142,6 +164,8 @@ def check_output(out: Path | None, command: str, fingerprint: str | None = None,
                 what = f"a finished `ema {mark.get('command')}` run"
             elif same:
                 what = f"an unfinished `ema {command}` run of the same inputs (it cannot resume)"
+            elif mark.get("command") != command:
+                what = f"an unfinished `ema {mark.get('command')}` run"
             else:
                 what = f"an unfinished `ema {mark.get('command')}` run of other inputs"
             raise EmaError(f"--out '{out}' already holds {what}; results are never overwritten: "

@@ -57,6 +57,9 @@ from ema_cli.errors import EmaError
 from ema_cli.files import RESULTS_ROOT, AtomicFile
 from ema_cli.report.rundir import (
     CACHE_NAME,
+    MARKER,
+    check_output,
+    finish_output,
     manifest,
     prepare_output,
     write_csv,
@@ -166,6 +169,7 @@ def run_sweep(
     source: str = "config",
     overrides: Sequence[tuple[str, Any]] = (),
     write: bool = True,
+    reuse_finished: bool = False,
 ) -> SweepResult:
     """Run a sweep end to end (``sweep.run.compute_sweep``) and write its outputs.
 
@@ -176,6 +180,9 @@ def run_sweep(
     overrides  the ``--set`` pairs, recorded in the manifest
     write      False: write nothing (no folder, and no cache unless ``cache_dir`` is given);
                the recorded signals stay readable from the result (kept in memory)
+    reuse_finished  ``out`` belongs to a run being resumed (``ema reproduce``): if it holds the
+               finished run of this very sweep, it is read (metrics from the job cache, signals
+               from its signals.parquet), never rewritten; otherwise the usual policy applies
 
     The other arguments are ``compute_sweep``'s. The folder is created once the sweep is
     planned, before any job runs; signals.parquet is streamed as chunks finish and renamed
@@ -186,11 +193,18 @@ def run_sweep(
     t_start = time.perf_counter()
     folder: Path | None = None
     writer: SignalsWriter | None = None
+    if write and out is not None and not Path(out).is_dir():
+        check_output(Path(out), "sweep")  # a file, or below one: refused before the cache is
     if cache_dir is None and write:
         cache_dir = default_cache_dir(out)
 
+    reused = False
+
     def on_start(plan: Plan) -> None:
-        nonlocal folder, writer
+        nonlocal folder, writer, reused
+        if write and reuse_finished and out is not None and finished_sweep(Path(out), plan):
+            folder, reused = Path(out), True
+            return
         if write:
             folder = prepare_folder(plan, out, overrides)
             if plan.cfg.outputs.timeseries and plan.dec > 0:
@@ -203,6 +217,10 @@ def run_sweep(
     def on_finish(result: SweepResult, aborted: bool) -> None:
         result.folder = folder
         if folder is None:
+            return
+        if reused:  # a finished run of this sweep: read, never rewritten
+            if (folder / SIGNALS_FILE).is_file():
+                result.signals_file = folder / SIGNALS_FILE
             return
         timings = result.timings
         t2 = time.perf_counter()
@@ -225,6 +243,8 @@ def run_sweep(
             write_manifest(result, overrides, failed.message if failed else None)
         if failed is not None:
             raise failed
+        if not aborted:
+            _finish_if_complete(result)
 
     return compute_sweep(cfg, n_jobs, backend, force, progress, scheduler=scheduler,
                          chunk_size=chunk_size, cache_dir=cache_dir, base_dir=base_dir,
@@ -253,7 +273,45 @@ def save_sweep(result: SweepResult, out: Path | None = None,
     write_outputs(result)
     result.timings["outputs"] = time.perf_counter() - t0
     write_manifest(result, overrides)
+    _finish_if_complete(result)
     return folder
+
+
+def _finish_if_complete(result: SweepResult) -> None:
+    """Mark the folder finished (``rundir.finish_output``: never resumed nor rewritten) once
+    every job finished: none pending, none failed, not interrupted."""
+    counts = result.counts()
+    if (result.folder is not None and not result.interrupted and not counts["pending"]
+            and not counts["failed"]):
+        finish_output(result.folder)
+
+
+def finished_sweep(folder: Path, plan: Plan) -> bool:
+    """True if ``folder`` holds the finished ``ema sweep`` run of ``plan`` (same sweep key)."""
+    try:
+        mark = json.loads((folder / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return (isinstance(mark, dict) and mark.get("command") == "sweep"
+            and mark.get("fingerprint") == plan.key and mark.get("finished") is True)
+
+
+def remove_stale_temporaries(folder: Path) -> None:
+    """Delete the temporary files (``.<name>.<12 hex>.tmp``, ``files.AtomicFile``) an earlier,
+    killed run left in ``folder`` and its figures/ and timeseries/ (resuming it: no other
+    process writes there)."""
+    import re
+
+    ours = re.compile(r"\..+\.[0-9a-f]{12}\.tmp")
+    for sub in (folder, folder / "figures", folder / "timeseries"):
+        try:
+            entries = list(sub.iterdir())
+        except OSError:
+            continue
+        for p in entries:
+            if ours.fullmatch(p.name) and p.is_file() and not p.is_symlink():
+                with contextlib.suppress(OSError):
+                    p.unlink()
 
 
 class SignalsWriter:
@@ -518,11 +576,14 @@ def prepare_folder(plan: Plan, out: Path | None, overrides: Sequence[tuple[str, 
     """Create the output folder before any job runs (so a bad ``--out`` loses nothing).
 
     The one ``--out`` policy (``rundir.prepare_output``): a new or empty folder, or an earlier
-    run of the same sweep (same ``plan.key``), which is resumed in place. A sweep folder is
-    never marked finished: the same sweep always gives the same outputs, so running it again
-    there only completes or rewrites them. Anything else is refused, never overwritten.
+    unfinished run of the same sweep (same ``plan.key``), which is resumed in place (the
+    temporary files a killed run left there are deleted first). A sweep whose every job
+    finished is marked finished: it is never rewritten. Anything else is refused, never
+    overwritten.
     """
-    folder, _ = prepare_output("sweep", plan.cfg.name, plan.key, out, resume=True)
+    folder, resumed = prepare_output("sweep", plan.cfg.name, plan.key, out, resume=True)
+    if resumed:
+        remove_stale_temporaries(folder)
     write_text(folder / "config.resolved.yaml",
                yaml.safe_dump(plan.cfg.model_dump(mode="json"), sort_keys=False))
     write_json(folder / "manifest.json", {  # provisional: identifies the sweep for a resume

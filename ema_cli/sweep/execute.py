@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import re
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -193,11 +194,19 @@ def _execute_joblib(chunks: Sequence[np.ndarray], signal: InputSignal, dt: float
         on_chunk(i, out)
 
 
+SCHEDULER_ADDRESS = re.compile(
+    r"(?:(?:tcp|tls|ucx|ws|wss)://)?(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):[0-9]{1,5}")
+"""What a dask scheduler address looks like: [tcp://]host:port (tls, ucx, ws(s) too)."""
+
+
 def check_dask(scheduler: str | None) -> None:
     """Refuse the dask backend early: no scheduler address, or dask.distributed missing."""
     if not scheduler:
         raise EmaError("the dask backend needs a scheduler address: --scheduler ADDRESS "
                        "(or parallel.scheduler in the config)")
+    if not SCHEDULER_ADDRESS.fullmatch(scheduler.strip()):
+        raise EmaError(f"--scheduler {scheduler!r} is not a dask scheduler address; expected "
+                       "tcp://HOST:PORT or HOST:PORT (or parallel.scheduler in the config)")
     try:
         import dask.distributed  # noqa: F401
     except ImportError:

@@ -204,6 +204,59 @@ def _axis_info(k: int, axis: SweepAxis) -> AxisInfo:
                     numeric, f"{name}: {what}", group_column=name)
 
 
+FIXED_COLUMNS = ("job", "label", "status", "key", "error", "diverged", "t_s")
+"""metrics.csv's and signals.parquet's own columns besides the metrics and the signals."""
+INTERNAL_COLUMNS = ("_index", "_baseline", "_category", "_others")
+"""Columns the figures add to a copy of the metrics table."""
+
+
+def check_columns(axes: list[AxisInfo], source: str = "config") -> None:
+    """Refuse an axis whose column (metrics.csv, signals.parquet) is a fixed column, a metric,
+    a signal or another axis's column, naming the axis and the column."""
+    from ema_cli.sim.tables import METRICS
+
+    fixed = {c: "a fixed column" for c in (*FIXED_COLUMNS, *INTERNAL_COLUMNS)}
+    fixed.update((c.edge, "a metric column") for c in METRICS)
+    fixed.update((c.edge, "a signal column") for c in SIGNALS)
+    owner: dict[str, AxisInfo] = {}
+    for info in axes:
+        for c in info.columns:
+            what = fixed.get(c)
+            if what is None and c in owner and owner[c].index != info.index:
+                what = f"a column of axis {owner[c].index} ('{owner[c].name}')"
+            if what is not None:
+                raise EmaError(f"{source}: sweep.axes.{info.index} ('{info.name}'): its column "
+                               f"'{c}' clashes with {what}; give the axis another "
+                               "sweep.axes.N.name")
+            owner[c] = info
+
+
+def check_parameters(cfg: StudyConfig, params: Mapping[str, float],
+                     source: str = "config") -> None:
+    """Refuse two axes that set the same model parameter (e.g. a ``deadzone2`` axis and a
+    ``parameter: alpha`` axis), naming both."""
+    from ema_cli.model.nonlinearities import nonlinearity_updates
+
+    writer: dict[str, str] = {}
+    for k, axis in enumerate(cfg.sweep.axes):
+        for t in axis.targets:
+            if axis.parameter is not None:
+                names: set[str] = {t}
+            else:
+                values = axis.value_list(t)
+                try:
+                    names = set(nonlinearity_updates(t, values[0] if values else 0.0, params,
+                                                     cfg.friction_reading))
+                except EmaError:
+                    continue  # the job that sets it reports the value
+            for name in names:
+                here = f"sweep.axes.{k} ('{t}')"
+                if name in writer and not writer[name].startswith(f"sweep.axes.{k} "):
+                    raise EmaError(f"{source}: {writer[name]} and {here} both set the model "
+                                   f"parameter '{name}'; sweep it on one axis")
+                writer.setdefault(name, here)
+
+
 def _relative_scales(cfg: StudyConfig, base_params: dict[str, float], sig: InputSignal,
                      dt: float, n_steps: int, dec: int) -> dict[str, float]:
     """Peak |signal| at each dead-zone location in the baseline run, in the location's unit.
@@ -313,6 +366,7 @@ def plan_sweep(cfg: StudyConfig, base_dir: Path | None = None, source: str = "co
     n_steps, dec = plan_steps(sim.duration_s, sim.dt_s, sim.output_interval_s)
     sig = input_signal(cfg.input, base_dir, cfg.load)
     axes = [_axis_info(k, a) for k, a in enumerate(cfg.sweep.axes)]
+    check_columns(axes, source)
 
     base_spec = JobSpec((), baseline=True)
     try:
@@ -321,6 +375,7 @@ def plan_sweep(cfg: StudyConfig, base_dir: Path | None = None, source: str = "co
         base_params = resolve_params(base_plant, base_nls, cfg.friction_reading)
     except EmaError as exc:
         raise EmaError(f"{source}: the baseline cannot be resolved: {exc.message}") from None
+    check_parameters(cfg, plain, source)
     scales = _relative_scales(cfg, base_params, sig, sim.dt_s, n_steps, dec)
 
     fixed = {"sim": simulator_fingerprint(), "signal": signal_identity(sig), "dt": sim.dt_s,

@@ -22,6 +22,7 @@ import pandas as pd
 
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
+from ema_cli.sim.runner import check_memory
 from ema_cli.sim.tables import MET, METRICS, N_METRICS, N_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import JobCache, SignalsRule, signals_rule
 from ema_cli.sweep.execute import (
@@ -285,6 +286,13 @@ def compute_sweep(
     scheduler = scheduler or cfg.parallel.scheduler
     if backend == "dask":
         check_dask(scheduler)
+    n_out_plan = plan.n_steps // plan.dec + 1 if plan.dec > 0 else 0
+    if n_out_plan > 0 and plan.jobs:  # one chunk's recording must fit: refused before any write
+        size = chunk_sizes(plan.n_unique, plan.n_steps, workers, backend, n_out_plan,
+                           chunk_size or cfg.parallel.chunk_size)[0]
+        check_memory(size, n_out_plan, 0)
+    if cache_dir is not None:
+        check_cache_dir(Path(cache_dir))
     if on_start is not None:  # first: a bad output folder is reported before anything is made
         on_start(plan)
     cache: JobCache | None = None
@@ -439,6 +447,28 @@ def compute_sweep(
             on_finish(result, aborted)
         timings["total"] = time.perf_counter() - t_start
     return result
+
+
+def check_cache_dir(path: Path) -> None:
+    """Refuse a job cache folder that is a file or cannot be created, before anything is
+    written (the cache itself is opened once the output folder exists)."""
+    import os
+
+    if path.exists() or path.is_symlink():
+        if not path.is_dir():
+            raise EmaError(f"--cache-dir '{path}' is a file; expected a folder (new or a job "
+                           "cache)")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise EmaError(f"--cache-dir '{path}' is not writable; expected a writable folder")
+        return
+    parent = next((p for p in path.absolute().parents if p.exists()), None)
+    if parent is None:
+        return
+    if not parent.is_dir():
+        raise EmaError(f"--cache-dir '{path}' cannot be created: '{parent}' is a file, not a "
+                       "folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise EmaError(f"--cache-dir '{path}' cannot be created: '{parent}' is not writable")
 
 
 def _lookup(cache: JobCache | None, by_key: dict[str, list[int]], force: bool, dec: int,

@@ -147,15 +147,16 @@ def test_interrupted_sweep_resumes_without_recomputing_or_duplicating(tmp_path, 
     signals = pd.read_parquet(tmp_path / "run" / "signals.parquet")
     assert sorted(signals["job"].unique()) == list(table["job"]) and len(signals) == 4 * 101
 
-    # --force recomputes everything; a different sweep may not reuse the folder
+    # --force recomputes everything (into a new folder: the finished one is never rewritten);
+    # a different sweep may not reuse the folder
     forced = CountingKernel()
     monkeypatch.setattr(execute, "simulate_batch", forced)
-    res = sweep(tmp_path, "run", cfg_path, n_jobs=1, force=True)
+    res = sweep(tmp_path, "run2", cfg_path, n_jobs=1, force=True, cache_dir=tmp_path / "cache")
     assert res.computed == 4 and len(forced.rows) == 4
     other = write_config(tmp_path, name="other")
     r = runner.invoke(app, ["sweep", str(other), "--out", str(tmp_path / "run"),
                             "--cache-dir", str(tmp_path / "cache"), "--no-progress"])
-    assert r.exit_code == 2 and "already holds an unfinished `ema sweep` run of other" in " ".join(
+    assert r.exit_code == 2 and "already holds a finished `ema sweep` run" in " ".join(
         r.output.split())
 
 
