@@ -199,9 +199,9 @@ def prepare_output(command: str, name: str, fingerprint: str, out: Path | None =
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise EmaError(f"--out '{out}': cannot create the folder ({exc.strerror})", 1) from None
+        raise EmaError(f"--out '{out}': cannot create the folder ({exc.strerror})") from None
     if not os.access(out, os.W_OK):
-        raise EmaError(f"--out '{out}': the folder is not writable", 1)
+        raise EmaError(f"--out '{out}': the folder is not writable")
     write_json(out / MARKER, {"command": command, "fingerprint": fingerprint,
                               "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
                               "finished": False})
