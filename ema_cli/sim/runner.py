@@ -90,6 +90,23 @@ class BatchResult:
         df["diverged"] = df["diverged"].astype(bool)
         return df
 
+    @property
+    def signal_names(self) -> tuple[str, ...]:
+        """The kernel names of the recorded signals, in the order of the last axis of
+        ``signals`` (``theta_ref``, ``theta_load``, ...; ``sim.tables.SIGNALS``)."""
+        return tuple(c.name for c in SIGNALS)
+
+    def signal(self, name: str, case: int = 0, edge: bool = False) -> np.ndarray:
+        """One recorded signal of one case by name (kernel name ``theta_load`` or edge column
+        ``theta_load_deg``): SI, or in its edge unit with ``edge``."""
+        if self.signals is None:
+            raise EmaError("no signals were recorded (simulation.output_interval_s is null)")
+        for j, c in enumerate(SIGNALS):
+            if name in (c.name, c.edge):
+                return self.signals[case, :, j] * (c.factor if edge else 1.0)
+        raise EmaError(f"unknown signal {name!r}; expected one of "
+                       f"{', '.join(c.name for c in SIGNALS)}")
+
     def signals_frame(self, case: int = 0) -> pd.DataFrame:
         """Recorded signals of one case in edge units, ``t_s`` first."""
         import pandas as pd

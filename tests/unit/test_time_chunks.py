@@ -330,3 +330,19 @@ def test_load_time_is_reported_on_first_use_in_a_process(monkeypatch):
                                       out.stdout.split("\n")[:2])
     assert load1 > 0.0 and load2 == 0.0
     assert 0.0 < kern1 < 1.0 and 0.0 < kern2 < 1.0
+
+
+def test_batch_results_name_their_signals():
+    from ema_cli.model.params import resolve
+    from ema_cli.sim.runner import simulate
+    from ema_cli.sim.signals import InputSignal
+    from ema_cli.units import DEG
+
+    res = simulate(resolve(), InputSignal(amplitude=2 * DEG), 0.01)
+    k = res.signal_names.index("theta_load")
+    np.testing.assert_array_equal(res.signal("theta_load"), res.signals[0, :, k])
+    np.testing.assert_allclose(res.signal("theta_load_deg", edge=True),
+                               res.signals[0, :, k] / DEG, rtol=1e-15)
+    assert res.signal("theta_ref", edge=True)[-1] == pytest.approx(2.0, rel=1e-12)
+    with pytest.raises(EmaError, match="unknown signal"):
+        res.signal("nope")
