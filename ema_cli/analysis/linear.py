@@ -1,0 +1,226 @@
+"""The model's linear limit as a state-space system, its frequency responses and loop margins.
+
+Linear limit (docs/model.md §2 with every nonlinearity removed): saturations SAT1-3 open, no
+dead zones, no backlash (``alpha`` ignored: permanent contact), no quantisers, a continuous
+controller, and LuGre friction linearised to its viscous part (``sigma2*w_m`` when friction is
+on). The constant load torque only moves the operating point and drops out; the hinge-moment
+gradient ``k_h`` stays.
+
+States ``x = [theta_m, w_m, i, theta_L, w_L, xI]`` (SI), inputs ``u = [theta_ref, T_d]`` (a
+torque disturbance on the load, + along +theta_L), outputs ``y = [theta_L, w_L, theta_m,
+w_m, i, u_dem]``:
+
+    dtheta_m = w_m
+    Jm dw_m  = Kt i - (bm + f) w_m - T/m             f = sigma2 if friction on, else 0
+    L di     = u_dem - R i - Ke w_m
+    dtheta_L = w_L
+    JL dw_L  = T - bL w_L - k_h theta_L + T_d
+    dxI      = e_w
+    T        = kL (theta_m/m - theta_L) + c (w_m/m - w_L)
+    u_dem    = Kps e_w + Kis xI,   e_w = m Kpp (theta_ref - theta_L) - w_m
+
+Loops are broken at their feedback (the measured load angle for the position loop, the
+measured motor speed for the speed loop) with the other loop closed; the loop transfer is
+``L(s) = -(return at the break)/(injection)``, so the closed loop is stable when the Nyquist
+curve of ``L`` obeys the usual criterion and ``1 + L`` is the return difference.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from ema_cli.errors import EmaError
+
+STATE_NAMES = ("theta_m", "w_m", "i", "theta_L", "w_L", "xI")
+INPUT_NAMES = ("theta_ref", "torque_disturbance")
+OUTPUT_NAMES = ("theta_L", "w_L", "theta_m", "w_m", "i", "u_dem")
+LOOPS = ("position", "speed")
+
+
+@dataclass(frozen=True)
+class StateSpace:
+    """``dx/dt = A x + B u``, ``y = C x + D u`` (SI), with names for states, inputs, outputs."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    states: tuple[str, ...]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+
+    def response(self, f_hz: np.ndarray, inp: str = "theta_ref",
+                 out: str = "theta_L") -> np.ndarray:
+        """The complex frequency response ``Y(j w)/U(j w)`` at ``f_hz`` [Hz]."""
+        j = self.inputs.index(inp)
+        k = self.outputs.index(out)
+        n = self.A.shape[0]
+        eye = np.eye(n)
+        out_h = np.empty(len(np.atleast_1d(f_hz)), dtype=complex)
+        for q, f in enumerate(np.atleast_1d(f_hz)):
+            s = 2j * math.pi * f
+            x = np.linalg.solve(s * eye - self.A, self.B[:, j])
+            out_h[q] = self.C[k] @ x + self.D[k, j]
+        return out_h
+
+
+def _coefficients(p: Mapping[str, float]) -> dict[str, float]:
+    m = p["m"]
+    return {"m": m, "kL": p["kL"], "c": p["c"], "Jm": p["Jm"], "JL": p["JL"],
+            "bm": p["bm"] + (p["sigma2"] if p["friction"] else 0.0), "bL": p["bL"],
+            "Kt": p["Kt"], "Ke": p["Ke"], "R": p["R"], "L": p["L"], "kh": p["k_h"],
+            "Kpp": p["Kpp"], "Kps": p["Kps"], "Kis": p["Kis"]}
+
+
+def _plant_rows(q: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The open-loop plant: A_p (6x6, controller states included but unconnected), the column
+    of u_dem and of the disturbance torque."""
+    m, kL, c = q["m"], q["kL"], q["c"]
+    A = np.zeros((6, 6))
+    A[0, 1] = 1.0
+    # Jm dw_m = Kt i - bm w_m - T/m, T = kL(th_m/m - th_L) + c(w_m/m - w_L)
+    A[1, 0] = -kL / m**2 / q["Jm"]
+    A[1, 1] = (-q["bm"] - c / m**2) / q["Jm"]
+    A[1, 2] = q["Kt"] / q["Jm"]
+    A[1, 3] = kL / m / q["Jm"]
+    A[1, 4] = c / m / q["Jm"]
+    # L di = u - R i - Ke w_m
+    A[2, 1] = -q["Ke"] / q["L"]
+    A[2, 2] = -q["R"] / q["L"]
+    A[3, 4] = 1.0
+    # JL dw_L = T - bL w_L - kh th_L + Td
+    A[4, 0] = kL / m / q["JL"]
+    A[4, 1] = c / m / q["JL"]
+    A[4, 3] = (-kL - q["kh"]) / q["JL"]
+    A[4, 4] = (-c - q["bL"]) / q["JL"]
+    b_u = np.zeros(6)
+    b_u[2] = 1.0 / q["L"]
+    b_d = np.zeros(6)
+    b_d[4] = 1.0 / q["JL"]
+    return A, b_u, b_d
+
+
+def linear_model(params: Mapping[str, float], broken: str | None = None) -> StateSpace:
+    """The closed-loop linear limit of the EMA for the SI parameters ``params``.
+
+    ``broken`` None: both loops closed, inputs ``theta_ref`` and ``torque_disturbance``.
+    ``broken`` ``"position"`` or ``"speed"``: that loop's measurement is replaced by an
+    injected signal ``v`` (the only input) and the output ``return`` is what the loop would
+    have measured (theta_L, or w_m); the other loop stays closed. ``L(s) = -return/v``.
+    """
+    if broken not in (None, *LOOPS):
+        raise EmaError(f"loop must be one of {', '.join(LOOPS)}, got {broken!r}")
+    q = _coefficients(params)
+    for name in ("m", "kL", "Jm", "JL", "L", "R"):
+        if not (math.isfinite(q[name]) and q[name] > 0):
+            raise EmaError(f"the linear model needs a finite {name} > 0, got {q[name]}")
+    A, b_u, b_d = _plant_rows(q)
+    m, Kpp, Kps, Kis = q["m"], q["Kpp"], q["Kps"], q["Kis"]
+    # e_w = m Kpp (theta_ref - th_meas) - w_meas ; u = Kps e_w + Kis xI ; dxI = e_w
+    # as rows over [x, theta_ref, v]: e_w = ew_x @ x + ew_r * theta_ref + ew_v * v
+    ew_x = np.zeros(6)
+    ew_v = 0.0
+    ew_r = m * Kpp
+    if broken == "position":
+        ew_v = -m * Kpp
+    else:
+        ew_x[3] = -m * Kpp
+    if broken == "speed":
+        ew_v = -1.0
+    else:
+        ew_x[1] = -1.0
+    u_x = Kps * ew_x
+    u_x[5] += Kis
+    Acl = A + np.outer(b_u, u_x)
+    Acl[5, :] += ew_x
+    col_r = b_u * (Kps * ew_r)
+    col_r[5] += ew_r
+    col_v = b_u * (Kps * ew_v)
+    col_v[5] += ew_v
+    C = np.zeros((6, 6))
+    for k, s in enumerate(("theta_L", "w_L", "theta_m", "w_m", "i")):
+        C[k, STATE_NAMES.index(s)] = 1.0
+    C[5] = u_x
+    if broken is None:
+        B = np.column_stack([col_r, b_d])
+        D = np.zeros((6, 2))
+        D[5, 0] = Kps * ew_r
+        return StateSpace(Acl, B, C, D, STATE_NAMES, INPUT_NAMES, OUTPUT_NAMES)
+    ret = STATE_NAMES.index("theta_L" if broken == "position" else "w_m")
+    Cr = np.zeros((1, 6))
+    Cr[0, ret] = 1.0
+    return StateSpace(Acl, col_v[:, None], Cr, np.zeros((1, 1)), STATE_NAMES, ("v",),
+                      ("return",))
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Stability margins of one loop: gain margin [dB] at the phase crossover [Hz], phase
+    margin [deg] at the gain crossover [Hz] (inf / NaN where there is no crossover)."""
+
+    loop: str
+    gm_db: float
+    pm_deg: float
+    f_gm_hz: float
+    f_pm_hz: float
+
+    def to_json(self) -> dict[str, float]:
+        return {"gm_db": self.gm_db, "pm_deg": self.pm_deg, "f_gm_hz": self.f_gm_hz,
+                "f_pm_hz": self.f_pm_hz}
+
+
+def loop_transfer(params: Mapping[str, float], loop: str, f_hz: np.ndarray) -> np.ndarray:
+    """``L(j 2 pi f)`` of ``loop`` broken at its feedback (the other loop closed)."""
+    return -linear_model(params, loop).response(f_hz, "v", "return")
+
+
+def _refine(fun, a: float, b: float) -> float:
+    """A root of ``fun`` in [a, b] (a sign change), by bisection on log f to 1e-12."""
+    fa = fun(a)
+    for _ in range(200):
+        mid = math.sqrt(a * b)
+        fm = fun(mid)
+        if (fm > 0) == (fa > 0):
+            a, fa = mid, fm
+        else:
+            b = mid
+        if b / a - 1 < 1e-13:
+            break
+    return math.sqrt(a * b)
+
+
+def margins(params: Mapping[str, float], loop: str, f_min: float = 1e-3, f_max: float = 1e5,
+            n: int = 4000) -> Margins:
+    """Gain and phase margins of ``loop`` ("position" or "speed"), from a dense log grid of
+    ``L(j w)`` refined by bisection at each crossing; the smallest margins are reported when
+    there are several crossings."""
+    f = np.geomspace(f_min, f_max, n)
+    Lf = loop_transfer(params, loop, f)
+    mag = np.abs(Lf)
+
+    def one(x: float) -> complex:
+        return complex(loop_transfer(params, loop, np.array([x]))[0])
+
+    pm, f_pm = math.inf, math.nan
+    for k in np.flatnonzero(np.diff(np.sign(mag - 1.0)) != 0):
+        fc = _refine(lambda x: abs(one(x)) - 1.0, f[k], f[k + 1])
+        p = math.degrees(math.atan2(one(fc).imag, one(fc).real))
+        margin = (p % 360.0) - 180.0  # 180 + angle, in (-180, 180]
+        if abs(margin) < abs(pm):
+            pm, f_pm = margin, fc
+    gm, f_gm = math.inf, math.nan
+    # phase crossovers: L crosses the negative real axis (Im L changes sign where Re L < 0)
+    im = Lf.imag
+    for k in np.flatnonzero(np.sign(im[:-1]) != np.sign(im[1:])):
+        fc = _refine(lambda x: one(x).imag, f[k], f[k + 1])
+        lc = one(fc)
+        if lc.real >= 0:
+            continue
+        value = -20.0 * math.log10(abs(lc))
+        if abs(value) < abs(gm):
+            gm, f_gm = value, fc
+    return Margins(loop, gm, pm, f_gm, f_pm)
