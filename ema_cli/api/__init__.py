@@ -18,10 +18,11 @@ load when first needed.
 from __future__ import annotations
 
 from ema_cli.api.identification import Identification, identify
+from ema_cli.api.margins import LoopMargins, margins
 from ema_cli.api.simulation import Simulation, simulate
 from ema_cli.api.study import Sweep, sweep
 from ema_cli.api.threshold import Threshold, threshold
 from ema_cli.errors import EmaError
 
-__all__ = ["EmaError", "Identification", "Simulation", "Sweep", "Threshold", "identify",
-           "simulate", "sweep", "threshold"]
+__all__ = ["EmaError", "Identification", "LoopMargins", "Simulation", "Sweep", "Threshold",
+           "identify", "margins", "simulate", "sweep", "threshold"]

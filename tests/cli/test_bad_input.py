@@ -26,6 +26,7 @@ WRITERS = {
                   "--metric", "ss_err_pos_deg", "--limit", "0.5",
                   "--set", "simulation.duration_s=0.01"],
     "identify": ["identify", "--method", "exact"],
+    "margins": ["margins"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
 }
 
@@ -72,7 +73,7 @@ def test_out_holding_other_files_is_never_overwritten(tmp_path, cmd):
     assert (tmp_path / "mine.csv").read_text() == "precious"
 
 
-@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify"])
+@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins"])
 def test_a_finished_run_is_not_overwritten(tmp_path, cmd):
     out = tmp_path / "run"
     r = invoke(*WRITERS[cmd], "--out", str(out))
@@ -131,7 +132,7 @@ def test_numeric_options_are_checked_and_named(tmp_path, args, needles):
 
 
 @pytest.mark.parametrize("cmd", ["simulate", "sweep", "threshold", "identify", "reproduce",
-                                 "validate", "show"])
+                                 "validate", "show", "margins"])
 def test_every_command_takes_set(cmd):
     r = invoke(cmd, "--help")
     assert r.exit_code == 0 and "--set" in r.output
