@@ -1,0 +1,145 @@
+"""Sinestream frequency response of the (nonlinear) actuator, by simulation.
+
+One simulation per (amplitude, frequency): a sine reference ``A sin(2 pi f t)`` on the load
+angle, held for a settling time, then measured over whole periods. Each frequency is snapped to
+a period of a whole number of integration steps that is also a whole number of recorded samples
+(``SAMPLES_PER_PERIOD``), so a single-bin DFT over whole periods has no leakage. From the
+DFT of the load angle against the DFT of the reference over the same window: gain [dB], phase
+[deg], and the total harmonic distortion of the load angle (harmonics 2..``HARMONICS``) as the
+nonlinearity indicator; from the recorded current and voltage demand and the position error,
+which limit was reached (SAT1 load-speed command, SAT2 voltage, SAT3 current).
+
+All amplitudes of one frequency run in one kernel batch. Units: SI inside, degrees and Hz in
+the results (``FreqPoint``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ema_cli.errors import EmaError
+from ema_cli.sim.tables import SIGNALS
+from ema_cli.units import DEG
+
+SAMPLES_PER_PERIOD = 200  # recorded samples per period of the reference [-]
+HARMONICS = 10  # highest harmonic in the distortion [-]
+SETTLE_PERIODS = 3  # settling before the measurement, at least [periods]
+SETTLE_S = 0.3  # settling before the measurement, at least [s]
+MEASURE_PERIODS = 4  # measured periods [periods]
+LIMIT_TOL = 1e-9  # a limit counts as reached within this relative margin [-]
+_COL = {c.name: k for k, c in enumerate(SIGNALS)}
+
+
+@dataclass(frozen=True)
+class FreqPoint:
+    """One (amplitude, frequency) of a sinestream: gain [dB] and phase [deg] of the load angle
+    against the reference, its harmonic distortion [%], and the limits reached."""
+
+    amplitude_deg: float
+    f_hz: float
+    gain_db: float
+    phase_deg: float
+    thd_pct: float
+    limits: tuple[str, ...]
+    diverged: bool
+
+
+def snap_frequency(f_hz: float, dt: float) -> tuple[float, int, int]:
+    """A frequency within 0.25 % of ``f_hz`` whose period is a whole number of recorded
+    samples, each a whole number of steps -> (frequency [Hz], steps per sample, samples per
+    period, between :data:`SAMPLES_PER_PERIOD` and twice that, or fewer for a period shorter
+    than that many steps)."""
+    steps = 1.0 / (f_hz * dt)
+    dec = max(1, int(steps // SAMPLES_PER_PERIOD))
+    spp = max(1, round(steps / dec))
+    return 1.0 / (dec * spp * dt), dec, spp
+
+
+def _bin(y: np.ndarray, k: int) -> complex:
+    """The DFT bin of ``k`` cycles per ``len(y)`` samples, as a complex amplitude."""
+    n = len(y)
+    return 2.0 / n * complex(np.dot(y, np.exp(-2j * math.pi * k * np.arange(n) / n)))
+
+
+def sinestream(params: Mapping[str, float], amplitudes_deg: Sequence[float],
+               freqs_hz: Sequence[float], dt: float = 1e-5,
+               parallel: bool = True) -> list[FreqPoint]:
+    """Simulate the sinestream of the SI parameters ``params`` -> one point per amplitude and
+    frequency (amplitude-major)."""
+    from ema_cli.model.params import to_row
+    from ema_cli.sim.runner import simulate_batch
+    from ema_cli.sim.signals import InputSignal
+
+    amps = [float(a) for a in amplitudes_deg]
+    if not amps or any(not (math.isfinite(a) and a > 0) for a in amps):
+        raise EmaError(f"amplitudes must be finite numbers > 0 [deg], got {amplitudes_deg}")
+    freqs = [float(f) for f in freqs_hz]
+    if not freqs or any(not (math.isfinite(f) and f > 0) for f in freqs):
+        raise EmaError(f"frequencies must be finite numbers > 0 [Hz], got {freqs_hz}")
+    row = to_row(params)
+    out: dict[tuple[int, int], FreqPoint] = {}
+    for j, f_req in enumerate(freqs):
+        f, dec, spp = snap_frequency(f_req, dt)
+        if dec * spp < 8 * (HARMONICS + 1):
+            raise EmaError(f"{f_req:g} Hz is too fast for dt = {dt:g} s (a period needs "
+                           f"{8 * (HARMONICS + 1)} steps at least)")
+        period_steps = dec * spp
+        settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * f))
+        n_steps = (settle + MEASURE_PERIODS) * period_steps
+        refs = [InputSignal(kind="sine", amplitude=a * DEG, freq=f) for a in amps]
+        P = np.array([row] * len(amps))
+        res = simulate_batch(P, refs, np.arange(len(amps)), dt, n_steps, dec,
+                             parallel=parallel)
+        first = settle * spp
+        last = first + MEASURE_PERIODS * spp
+        for i, a in enumerate(amps):
+            sig = res.signals[i, first:last]
+            r1 = _bin(sig[:, _COL["theta_ref"]], MEASURE_PERIODS)
+            y = sig[:, _COL["theta_load"]]
+            y1 = _bin(y, MEASURE_PERIODS)
+            h = y1 / r1
+            harm = [_bin(y, MEASURE_PERIODS * k) for k in range(2, HARMONICS + 1)]
+            thd = 100.0 * math.sqrt(sum(abs(x) ** 2 for x in harm)) / abs(y1) if y1 else math.inf
+            out[(i, j)] = FreqPoint(a, f, 20.0 * math.log10(abs(h)),
+                                    math.degrees(math.atan2(h.imag, h.real)), thd,
+                                    _limits(params, sig), bool(res.diverged[i]))
+    points = [out[(i, j)] for i in range(len(amps)) for j in range(len(freqs))]
+    return _unwrap(points, len(freqs))
+
+
+def _limits(p: Mapping[str, float], sig: np.ndarray) -> tuple[str, ...]:
+    """The saturations reached in the measured window (SAT1 from the position error)."""
+    reached = []
+    e = sig[:, _COL["theta_ref"]] - sig[:, _COL["theta_load"]]
+    if np.max(np.abs(p["Kpp"] * e)) >= p["sat1"] * (1 - LIMIT_TOL):
+        reached.append("sat1")
+    if np.max(np.abs(sig[:, _COL["voltage_cmd"]])) >= p["sat2"] * (1 - LIMIT_TOL):
+        reached.append("sat2")
+    if np.max(np.abs(sig[:, _COL["current"]])) >= p["sat3"] * (1 - LIMIT_TOL):
+        reached.append("sat3")
+    return tuple(reached)
+
+
+def _unwrap(points: list[FreqPoint], n_freq: int) -> list[FreqPoint]:
+    """Phases continuous along frequency within each amplitude (starting in (-180, 180])."""
+    out = []
+    for start in range(0, len(points), n_freq):
+        block = points[start:start + n_freq]
+        phase = np.degrees(np.unwrap(np.radians([p.phase_deg for p in block])))
+        out += [FreqPoint(p.amplitude_deg, p.f_hz, p.gain_db, float(ph), p.thd_pct, p.limits,
+                          p.diverged) for p, ph in zip(block, phase, strict=True)]
+    return out
+
+
+def crossing(f_hz: np.ndarray, y: np.ndarray, level: float) -> float:
+    """The first frequency where ``y`` falls through ``level``, interpolated on log f (NaN if
+    it never does)."""
+    for k in range(len(y) - 1):
+        if y[k] >= level > y[k + 1]:
+            w = (y[k] - level) / (y[k] - y[k + 1])
+            return float(math.exp(math.log(f_hz[k]) + w * math.log(f_hz[k + 1] / f_hz[k])))
+    return math.nan
