@@ -10,7 +10,16 @@ from __future__ import annotations
 import typer
 
 from ema_cli import __version__
-from ema_cli.cli import identify, locations, margins, reproduce, simulate, sweep, threshold
+from ema_cli.cli import (
+    freqresp,
+    identify,
+    locations,
+    margins,
+    reproduce,
+    simulate,
+    sweep,
+    threshold,
+)
 
 app = typer.Typer(
     name="ema",
@@ -43,6 +52,7 @@ COMMANDS = (
     ("show", sweep.show_cmd),
     ("threshold", threshold.threshold_cmd),
     ("margins", margins.margins_cmd),
+    ("freqresp", freqresp.freqresp_cmd),
     ("identify", identify.identify_cmd),
     ("reproduce", reproduce.reproduce_cmd),
     ("locations", locations.locations_cmd),
@@ -54,8 +64,8 @@ for _name, _fn in COMMANDS:
     app.command(_name)(_fn)
 
 
-FAST_EXIT = frozenset({"simulate", "validate", "show", "threshold", "margins", "locations",
-                       "params"})
+FAST_EXIT = frozenset({"simulate", "validate", "show", "threshold", "margins", "freqresp",
+                       "locations", "params"})
 """Commands that start no worker processes: once they have finished (every file written and
 closed, output flushed) the process ends at once. The interpreter's own teardown of numba,
 LLVM and matplotlib takes ~0.45 s and does nothing these commands need; commands that may start

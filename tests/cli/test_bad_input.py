@@ -27,6 +27,7 @@ WRITERS = {
                   "--set", "simulation.duration_s=0.01"],
     "identify": ["identify", "--method", "exact"],
     "margins": ["margins"],
+    "freqresp": ["freqresp", "--amplitudes", "1", "--f-min", "5", "--f-max", "10", "--n", "2"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
 }
 
@@ -73,7 +74,7 @@ def test_out_holding_other_files_is_never_overwritten(tmp_path, cmd):
     assert (tmp_path / "mine.csv").read_text() == "precious"
 
 
-@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins"])
+@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins", "freqresp"])
 def test_a_finished_run_is_not_overwritten(tmp_path, cmd):
     out = tmp_path / "run"
     r = invoke(*WRITERS[cmd], "--out", str(out))
@@ -132,7 +133,7 @@ def test_numeric_options_are_checked_and_named(tmp_path, args, needles):
 
 
 @pytest.mark.parametrize("cmd", ["simulate", "sweep", "threshold", "identify", "reproduce",
-                                 "validate", "show", "margins"])
+                                 "validate", "show", "margins", "freqresp"])
 def test_every_command_takes_set(cmd):
     r = invoke(cmd, "--help")
     assert r.exit_code == 0 and "--set" in r.output

@@ -1,0 +1,84 @@
+"""`ema freqresp`: sinestream frequency response at several amplitudes (nonlinear)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ema_cli.cli.common import (
+    check_number,
+    console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
+from ema_cli.errors import EmaError
+
+
+def parse_amplitudes(text: str | None) -> list[float]:
+    """``--amplitudes 0.1,1,5`` (commas or spaces) -> degrees, each finite and > 0."""
+    if text is None:
+        return [0.1, 1.0, 5.0]
+    items = [t for t in text.replace(",", " ").split() if t]
+    try:
+        values = [float(t) for t in items]
+    except ValueError:
+        raise EmaError(f"--amplitudes expects numbers in deg, e.g. 0.1,1,5; got {text!r}") from None
+    if not values:
+        raise EmaError("--amplitudes expects at least one amplitude [deg]")
+    for v in values:
+        check_number(v, "--amplitudes", low=0.0, low_open=True)
+    return values
+
+
+@handle_errors
+def freqresp_cmd(
+    config: Annotated[Path | None, typer.Argument(
+        help="YAML study config (default: the bundled defaults).")] = None,
+    amplitudes: Annotated[str | None, typer.Option(
+        "--amplitudes", help="Reference amplitudes [deg], comma-separated (default 0.1,1,5).")
+    ] = None,
+    f_min: Annotated[float, typer.Option("--f-min", help="Lowest frequency [Hz].")] = 0.5,
+    f_max: Annotated[float, typer.Option("--f-max", help="Highest frequency [Hz].")] = 50.0,
+    n: Annotated[int, typer.Option("--n", help="Log-spaced frequencies.")] = 30,
+    nl: Annotated[list[str] | None, typer.Option(
+        "--nl", help="Nonlinearity NAME=VALUE in the units of `ema locations`; repeatable.")
+    ] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Override a config value by dotted path; repeatable.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
+) -> None:
+    """Sinestream frequency response of the load angle at each amplitude: gain, phase, harmonic
+    distortion and the limits reached, with the -3 dB bandwidth and -90 deg frequency per
+    amplitude; writes freqresp.csv, freqresp.json, bode.png and summary.md."""
+    from rich.table import Table
+
+    from ema_cli.api.freqresp import freqresp
+    from ema_cli.report.rundir import check_output
+
+    amps = parse_amplitudes(amplitudes)
+    check_number(f_min, "--f-min", low=0.0, low_open=True)
+    check_number(f_max, "--f-max", low=0.0, low_open=True)
+    check_number(n, "--n", low=2, high=2000)
+    check_output(out, "freqresp")
+    res = freqresp(config, parse_assignments(set_, "--set"), amplitudes_deg=amps,
+                   f_min_hz=f_min, f_max_hz=f_max, n=n, nl=dict(parse_assignments(nl, "--nl")))
+    folder = res.save(out)
+    summary = res.summary
+    table = Table(title=res.title)
+    for c in ("amplitude [deg]", "-3 dB [Hz]", "-90 deg [Hz]", "peak [dB]", "max THD [%]",
+              "limits"):
+        table.add_column(c, justify="right")
+    for r in summary["amplitudes"]:
+        table.add_row(f"{r['amplitude_deg']:g}", f"{r['f_3db_hz']:.4g}",
+                      f"{r['f_minus90_hz']:.4g}", f"{r['peak_db']:.3g}",
+                      f"{r['max_thd_pct']:.3g}", ", ".join(r["limits"]) or "none")
+    console.print(table)
+    drop = summary["bandwidth_drop"]
+    if drop is not None:
+        console.print(f"bandwidth drops > 10 % at {drop['amplitude_deg']:g} deg "
+                      f"({drop['f_3db_hz']:.4g} Hz vs {drop['small_signal_f_3db_hz']:.4g} Hz); "
+                      f"limits reached: {', '.join(drop['limits']) or 'none'}")
+    console.print(f"{len(res.points)} simulations in {res.wall_time_s:.2f} s -> {folder}")

@@ -1,0 +1,96 @@
+"""``ema freqresp``: freqresp.csv, freqresp.json, bode.png and summary.md."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ema_cli.report.figures import subplots
+from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
+
+OUTPUT_FILES = ("config.resolved.yaml", "freqresp.csv", "freqresp.json", "bode.png",
+                "summary.md", "manifest.json")
+
+
+def bode_figure(res: Any, title: str) -> Figure:
+    """Gain and phase of the load angle vs frequency, one curve per amplitude (markers where a
+    limit was reached), the linear model dashed; THD below."""
+    fig, axes = subplots(3, 1, figsize=(10, 10), sharex=True)
+    f = res.f_hz
+    axes[0].semilogx(f, 20 * np.log10(np.abs(res.linear)), "k--", lw=1.2, label="linear model")
+    axes[1].semilogx(f, np.degrees(np.unwrap(np.angle(res.linear))), "k--", lw=1.2)
+    for k, a in enumerate(res.amplitudes):
+        blk = res.block(a)
+        g = np.array([p.gain_db for p in blk])
+        ph = np.array([p.phase_deg for p in blk])
+        thd = np.array([p.thd_pct for p in blk])
+        lim = np.array([bool(p.limits) for p in blk])
+        color = f"C{k}"
+        axes[0].semilogx(f, g, "-", color=color, lw=1.4, label=f"{a:g} deg")
+        axes[1].semilogx(f, ph, "-", color=color, lw=1.4)
+        axes[2].loglog(f, np.maximum(thd, 1e-6), "-", color=color, lw=1.2)
+        if lim.any():
+            axes[0].semilogx(f[lim], g[lim], "o", color=color, ms=4, mfc="none")
+    axes[0].axhline(-3, color="0.5", lw=0.8, ls=":")
+    axes[1].axhline(-90, color="0.5", lw=0.8, ls=":")
+    axes[0].set_ylabel("gain theta_L/theta_ref [dB]")
+    axes[1].set_ylabel("phase [deg]")
+    axes[2].set_ylabel("harmonic distortion [%]")
+    axes[2].set_xlabel("frequency [Hz]")
+    axes[0].set_title("Gain (circles: a limit reached; dotted: -3 dB)")
+    axes[1].set_title("Phase (dotted: -90 deg)")
+    axes[2].set_title("Total harmonic distortion of the load angle (harmonics 2-10)")
+    axes[0].legend(title="amplitude", fontsize=8, loc="lower left")
+    for a in axes:
+        a.grid(True, which="both", alpha=0.3)
+    fig.suptitle(title)
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.06, top=0.92, hspace=0.3)
+    return fig
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "—" if not math.isfinite(v) else f"{v:.4g}"
+    if isinstance(v, list):
+        return ", ".join(v) or "none"
+    return str(v)
+
+
+def summary_markdown(res: Any, summary: Mapping[str, Any]) -> str:
+    """summary.md: the per-amplitude table and the bandwidth verdict."""
+    lines = [f"# {res.title}", "", "| amplitude [deg] | -3 dB [Hz] | -90 deg [Hz] | peak [dB] | "
+             "at [Hz] | max THD [%] | limits reached |", "|---|---|---|---|---|---|---|"]
+    for r in summary["amplitudes"]:
+        lines.append(f"| {_fmt(r['amplitude_deg'])} | {_fmt(r['f_3db_hz'])} | "
+                     f"{_fmt(r['f_minus90_hz'])} | {_fmt(r['peak_db'])} | {_fmt(r['f_peak_hz'])}"
+                     f" | {_fmt(r['max_thd_pct'])} | {_fmt(r['limits'])} |")
+    lines += ["", f"Linear model: -3 dB at {_fmt(summary['linear']['f_3db_hz'])} Hz.", ""]
+    drop = summary["bandwidth_drop"]
+    if drop is None:
+        lines.append("The bandwidth stays within 10 % of the smallest amplitude's at every "
+                     "amplitude.")
+    else:
+        lines.append(f"The bandwidth first drops more than 10 % below the small-signal "
+                     f"{_fmt(drop['small_signal_f_3db_hz'])} Hz at {_fmt(drop['amplitude_deg'])}"
+                     f" deg ({_fmt(drop['f_3db_hz'])} Hz); limits reached there: "
+                     f"{_fmt(drop['limits'])}.")
+    return "\n".join(lines) + "\n\n![Bode plot](bode.png)\n"
+
+
+def write_freqresp(folder: Path, config_yaml: str, res: Any,
+                   manifest_fields: Mapping[str, Any]) -> list[str]:
+    """Write the folder -> the names written."""
+    summary = res.summary
+    write_text(folder / "config.resolved.yaml", config_yaml)
+    write_csv(folder / "freqresp.csv", res.to_pandas(), float_format="%.9g")
+    write_json(folder / "freqresp.json", summary)
+    write_figure(folder / "bode.png", bode_figure(res, res.title))
+    write_text(folder / "summary.md", summary_markdown(res, summary))
+    write_json(folder / "manifest.json", manifest("freqresp", outputs=list(OUTPUT_FILES),
+                                                  **manifest_fields))
+    return list(OUTPUT_FILES)
