@@ -96,7 +96,7 @@ def simulate_cmd(
     # the figure is drawn in a forked child that imports matplotlib meanwhile (None: in-process)
     worker = figure_worker.start()
     try:
-        folder, run, t_imports = _simulate(config, step, duration, dt, nl, set_, out, worker)
+        folder, run = _simulate(config, step, duration, dt, nl, set_, out, worker)
     except BaseException:
         if worker is not None:
             worker.cancel()
@@ -113,7 +113,7 @@ def simulate_cmd(
 
 def _simulate(config: Path | None, step: float | None, duration: float | None,
               dt: float | None, nl: list[str] | None, set_: list[str] | None, out: Path | None,
-              worker: Any) -> tuple[Path, Any, float]:
+              worker: Any) -> tuple[Path, Any]:
     import importlib
     import time
 
@@ -138,4 +138,4 @@ def _simulate(config: Path | None, step: float | None, duration: float | None,
     run.timings["imports"] = t_imports
     for w in run.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
-    return run.save(out, worker=worker), run, t_imports
+    return run.save(out, worker=worker), run

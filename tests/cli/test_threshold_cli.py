@@ -41,3 +41,11 @@ def test_threshold_cli_bad_input(tmp_path):
         r = runner.invoke(app, ["threshold", str(cfg), *args])
         assert r.exit_code != 0 and needle in r.output, (args, r.output)
         assert "Traceback" not in r.output
+
+
+def test_the_cli_rtol_default_is_the_library_default():
+    # cli/threshold.py keeps its own copy so that `ema --help` imports no numpy
+    from ema_cli.cli.threshold import DEFAULT_RTOL as cli_default
+    from ema_cli.config.criteria import DEFAULT_RTOL
+
+    assert cli_default == DEFAULT_RTOL
