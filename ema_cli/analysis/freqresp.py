@@ -135,6 +135,55 @@ def _unwrap(points: list[FreqPoint], n_freq: int) -> list[FreqPoint]:
     return out
 
 
+LIMITS = ("sat1", "sat2", "sat3")
+LIMIT_NAMES = {"sat1": "SAT1 load-speed command (rate limit)", "sat2": "SAT2 voltage demand",
+               "sat3": "SAT3 current"}
+
+
+def limit_amplitudes(params: Mapping[str, float], f_hz: np.ndarray) -> dict[str, np.ndarray]:
+    """The linear model's estimate of the reference amplitude [deg] at which each saturation is
+    first reached by a sine of frequency ``f_hz`` [Hz]: SAT1 ``sat1/(Kpp |1 - H|)`` (the
+    position error), SAT2 ``sat2/|U|`` (voltage demand), SAT3 ``sat3/|I|`` (current), where H,
+    U, I are the closed-loop responses of load angle, voltage demand and current to the
+    reference. Below these amplitudes the actuator is linear (no limit reached)."""
+    from ema_cli.analysis.linear import linear_model
+
+    ss = linear_model(params)
+    f = np.atleast_1d(np.asarray(f_hz, dtype=float))
+    h = ss.response(f)
+    with np.errstate(divide="ignore"):
+        return {
+            "sat1": params["sat1"] / (params["Kpp"] * np.abs(1.0 - h)) / DEG,
+            "sat2": params["sat2"] / np.abs(ss.response(f, out="u_dem")) / DEG,
+            "sat3": params["sat3"] / np.abs(ss.response(f, out="i")) / DEG,
+        }
+
+
+def limit_onsets(points: Sequence[FreqPoint]) -> dict[str, float]:
+    """The lowest frequency [Hz] at which each limit was reached in one amplitude's points."""
+    out: dict[str, float] = {}
+    for p in sorted(points, key=lambda q: q.f_hz):
+        for lim in p.limits:
+            out.setdefault(lim, p.f_hz)
+    return {k: out[k] for k in LIMITS if k in out}
+
+
+def binding_limit(points: Sequence[FreqPoint], f_3db_hz: float) -> str | None:
+    """The limit that shapes the bandwidth of one amplitude: of the limits reached at or
+    below the first frequency at or above the -3 dB bandwidth ``f_3db_hz`` (every frequency
+    if there is no -3 dB crossing), the one reached at the lowest frequency (None: no limit is
+    reached there, the bandwidth is the linear one)."""
+    pts = sorted(points, key=lambda q: q.f_hz)
+    if math.isfinite(f_3db_hz):
+        above = [p.f_hz for p in pts if p.f_hz >= f_3db_hz]
+        if above:
+            pts = [p for p in pts if p.f_hz <= above[0]]
+    onsets = limit_onsets(pts)
+    if not onsets:
+        return None
+    return min(onsets, key=lambda k: (onsets[k], LIMITS.index(k)))
+
+
 def crossing(f_hz: np.ndarray, y: np.ndarray, level: float) -> float:
     """The first frequency where ``y`` falls through ``level``, interpolated on log f (NaN if
     it never does)."""

@@ -54,10 +54,19 @@ class FrequencyResponse:
     def summary(self) -> dict[str, Any]:
         """freqresp.json: per amplitude the -3 dB bandwidth, the -90 deg frequency, the
         resonance peak and the limits reached; the amplitude where the bandwidth first drops
-        more than 10 % below the smallest amplitude's, with the limit responsible."""
+        more than 10 % below the smallest amplitude's, with the limit responsible
+        (``binding_limit``: the limit reached at the lowest frequency up to the bandwidth);
+        the linear model's bandwidth and its estimate of the amplitude at which each limit is
+        reached there."""
         import numpy as np
 
-        from ema_cli.analysis.freqresp import crossing
+        from ema_cli.analysis.freqresp import (
+            LIMITS,
+            binding_limit,
+            crossing,
+            limit_amplitudes,
+            limit_onsets,
+        )
 
         rows = []
         for a in self.amplitudes:
@@ -66,12 +75,15 @@ class FrequencyResponse:
             g = np.array([p.gain_db for p in blk])
             ph = np.array([p.phase_deg for p in blk])
             k = int(np.argmax(g))
-            limits = sorted({lim for p in blk for lim in p.limits})
-            rows.append({"amplitude_deg": a, "f_3db_hz": crossing(f, g, -3.0),
+            onsets = limit_onsets(blk)
+            f3 = crossing(f, g, -3.0)
+            rows.append({"amplitude_deg": a, "f_3db_hz": f3,
                          "f_minus90_hz": crossing(f, ph, -90.0), "peak_db": float(g[k]),
                          "f_peak_hz": float(f[k]), "max_thd_pct": float(max(p.thd_pct
                                                                              for p in blk)),
-                         "limits": limits, "diverged": any(p.diverged for p in blk)})
+                         "limits": list(onsets), "limit_onset_hz": onsets,
+                         "binding_limit": binding_limit(blk, f3),
+                         "diverged": any(p.diverged for p in blk)})
         small = rows[0]["f_3db_hz"]
         drop = None
         for r in rows[1:]:
@@ -79,12 +91,21 @@ class FrequencyResponse:
             if math.isfinite(small) and (not math.isfinite(bw) or bw < (1 - BANDWIDTH_DROP)
                                          * small):
                 drop = {"amplitude_deg": r["amplitude_deg"], "f_3db_hz": bw,
-                        "small_signal_f_3db_hz": small, "limits": r["limits"]}
+                        "small_signal_f_3db_hz": small,
+                        "drop_pct": (100.0 * (1.0 - bw / small) if math.isfinite(bw)
+                                     else math.nan),
+                        "binding_limit": r["binding_limit"], "limits": r["limits"]}
                 break
         f = self.f_hz
         gl = 20 * np.log10(np.abs(self.linear))
+        f_lin = crossing(f, gl, -3.0)
+        estimate = None
+        if math.isfinite(f_lin):
+            amp = {k: float(v[0]) for k, v in limit_amplitudes(self.params, [f_lin]).items()}
+            first = min(LIMITS, key=lambda k: amp[k])
+            estimate = {"f_hz": f_lin, "amplitude_deg": amp, "first_limit": first}
         return {"amplitudes": rows, "bandwidth_drop": drop,
-                "linear": {"f_3db_hz": crossing(f, gl, -3.0)}}
+                "linear": {"f_3db_hz": f_lin, "limit_at_bandwidth": estimate}}
 
     @property
     def metrics(self) -> pd.DataFrame:

@@ -69,16 +69,22 @@ def freqresp_cmd(
     summary = res.summary
     table = Table(title=res.title)
     for c in ("amplitude [deg]", "-3 dB [Hz]", "-90 deg [Hz]", "peak [dB]", "max THD [%]",
-              "limits"):
+              "limits", "binding"):
         table.add_column(c, justify="right")
     for r in summary["amplitudes"]:
         table.add_row(f"{r['amplitude_deg']:g}", f"{r['f_3db_hz']:.4g}",
                       f"{r['f_minus90_hz']:.4g}", f"{r['peak_db']:.3g}",
-                      f"{r['max_thd_pct']:.3g}", ", ".join(r["limits"]) or "none")
+                      f"{r['max_thd_pct']:.3g}", ", ".join(r["limits"]) or "none",
+                      r["binding_limit"] or "none")
     console.print(table)
     drop = summary["bandwidth_drop"]
     if drop is not None:
         console.print(f"bandwidth drops > 10 % at {drop['amplitude_deg']:g} deg "
                       f"({drop['f_3db_hz']:.4g} Hz vs {drop['small_signal_f_3db_hz']:.4g} Hz); "
-                      f"limits reached: {', '.join(drop['limits']) or 'none'}")
+                      f"binding limit: {drop['binding_limit'] or 'none'}")
+    est = summary["linear"]["limit_at_bandwidth"]
+    if est is not None:
+        console.print("linear estimate at the bandwidth ({:.4g} Hz): ".format(est["f_hz"])
+                      + ", ".join(f"{k} from {v:.3g} deg"
+                                  for k, v in est["amplitude_deg"].items()))
     console.print(f"{len(res.points)} simulations in {res.wall_time_s:.2f} s -> {folder}")

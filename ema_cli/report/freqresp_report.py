@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from ema_cli.analysis.freqresp import LIMIT_NAMES
 from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
 
@@ -61,15 +62,34 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _onsets(onsets: Mapping[str, float]) -> str:
+    return ", ".join(f"{k} ({v:.3g})" for k, v in onsets.items()) or "none"
+
+
+def _limit(name: str | None) -> str:
+    return "none (no limit reached up to the bandwidth)" if name is None else (
+        f"{name}, {LIMIT_NAMES[name]}")
+
+
 def summary_markdown(res: Any, summary: Mapping[str, Any]) -> str:
     """summary.md: the per-amplitude table and the bandwidth verdict."""
     lines = [f"# {res.title}", "", "| amplitude [deg] | -3 dB [Hz] | -90 deg [Hz] | peak [dB] | "
-             "at [Hz] | max THD [%] | limits reached |", "|---|---|---|---|---|---|---|"]
+             "at [Hz] | max THD [%] | limits reached (from [Hz]) | binding limit |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in summary["amplitudes"]:
         lines.append(f"| {_fmt(r['amplitude_deg'])} | {_fmt(r['f_3db_hz'])} | "
                      f"{_fmt(r['f_minus90_hz'])} | {_fmt(r['peak_db'])} | {_fmt(r['f_peak_hz'])}"
-                     f" | {_fmt(r['max_thd_pct'])} | {_fmt(r['limits'])} |")
-    lines += ["", f"Linear model: -3 dB at {_fmt(summary['linear']['f_3db_hz'])} Hz.", ""]
+                     f" | {_fmt(r['max_thd_pct'])} | {_onsets(r['limit_onset_hz'])} | "
+                     f"{r['binding_limit'] or 'none'} |")
+    lin = summary["linear"]
+    lines += ["", f"Linear model: -3 dB at {_fmt(lin['f_3db_hz'])} Hz."]
+    est = lin["limit_at_bandwidth"]
+    if est is not None:
+        amps = ", ".join(f"{LIMIT_NAMES[k]} from {_fmt(v)} deg"
+                         for k, v in est["amplitude_deg"].items())
+        lines.append(f"At that frequency the linear model reaches {amps}: "
+                     f"{est['first_limit']} binds first.")
+    lines.append("")
     drop = summary["bandwidth_drop"]
     if drop is None:
         lines.append("The bandwidth stays within 10 % of the smallest amplitude's at every "
@@ -77,8 +97,8 @@ def summary_markdown(res: Any, summary: Mapping[str, Any]) -> str:
     else:
         lines.append(f"The bandwidth first drops more than 10 % below the small-signal "
                      f"{_fmt(drop['small_signal_f_3db_hz'])} Hz at {_fmt(drop['amplitude_deg'])}"
-                     f" deg ({_fmt(drop['f_3db_hz'])} Hz); limits reached there: "
-                     f"{_fmt(drop['limits'])}.")
+                     f" deg ({_fmt(drop['f_3db_hz'])} Hz, {_fmt(drop['drop_pct'])} % lower); the "
+                     f"binding limit is {_limit(drop['binding_limit'])}.")
     return "\n".join(lines) + "\n\n![Bode plot](bode.png)\n"
 
 

@@ -6,7 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ema_cli.analysis.freqresp import crossing, sinestream, snap_frequency
+from ema_cli.analysis.freqresp import (
+    FreqPoint,
+    binding_limit,
+    crossing,
+    limit_amplitudes,
+    limit_onsets,
+    sinestream,
+    snap_frequency,
+)
 from ema_cli.analysis.linear import linear_model
 from ema_cli.errors import EmaError
 from ema_cli.model.params import resolve
@@ -44,6 +52,54 @@ def test_the_rate_limit_binds_at_a_large_amplitude():
     assert small.limits == () and "sat1" in large.limits
     assert large.gain_db < small.gain_db - 0.3 and large.phase_deg < small.phase_deg
     assert 2 * np.pi * large.f_hz * 20.0 > p["sat1"] / DEG
+
+
+@pytest.mark.parametrize(("limit", "f_req"), [("sat1", 4.0), ("sat1", 12.0), ("sat3", 36.0)])
+def test_the_linear_estimate_of_the_limit_amplitude_is_where_the_limit_starts(limit, f_req):
+    # below the first limit the actuator is linear, so the linear model predicts exactly the
+    # amplitude at which a limit is first reached: 2 % below it no limit, 2 % above it this one
+    p = resolve()
+    f, _, _ = snap_frequency(f_req, 1e-5)
+    est = {k: float(v[0]) for k, v in limit_amplitudes(p, [f]).items()}
+    assert min(est, key=est.get) == limit
+    below, above = sinestream(p, [0.98 * est[limit], 1.02 * est[limit]], [f])
+    assert below.limits == ()
+    assert above.limits == (limit,)
+
+
+def test_the_bandwidth_drops_at_large_amplitude_and_names_the_rate_limit():
+    # the linear model puts SAT1 at the bandwidth (6.24 Hz) from 19.8 deg; SAT2 and SAT3 need
+    # 2.2 and 5.8 times more: 20 deg loses a little bandwidth, 30 deg more than 10 %, both to
+    # SAT1 (issue 10)
+    from ema_cli.api import freqresp
+
+    res = freqresp(amplitudes_deg=[0.1, 20.0, 30.0], f_min_hz=2.0, f_max_hz=12.0, n=12)
+    s = res.summary
+    est = s["linear"]["limit_at_bandwidth"]
+    assert est["first_limit"] == "sat1"
+    assert est["amplitude_deg"]["sat1"] == pytest.approx(19.76, abs=0.02)
+    assert est["amplitude_deg"]["sat2"] > 2 * est["amplitude_deg"]["sat1"]
+    small, a20, a30 = s["amplitudes"]
+    assert small["binding_limit"] is None and small["limits"] == []
+    assert small["f_3db_hz"] == pytest.approx(s["linear"]["f_3db_hz"], rel=0.01)
+    assert a20["f_3db_hz"] < small["f_3db_hz"] * 0.999 and a20["binding_limit"] == "sat1"
+    assert a30["f_3db_hz"] < small["f_3db_hz"] * 0.9 and a30["binding_limit"] == "sat1"
+    drop = s["bandwidth_drop"]
+    assert drop["amplitude_deg"] == 30.0 and drop["binding_limit"] == "sat1"
+    assert drop["drop_pct"] == pytest.approx(100 * (1 - a30["f_3db_hz"] / small["f_3db_hz"]))
+
+
+def test_binding_limit_is_the_first_reached_up_to_the_bandwidth():
+    def pt(f, limits):
+        return FreqPoint(1.0, f, 0.0, 0.0, 0.0, limits, False)
+
+    pts = [pt(1.0, ()), pt(2.0, ("sat3",)), pt(4.0, ("sat1", "sat3")), pt(8.0, ("sat2",))]
+    assert limit_onsets(pts) == {"sat1": 4.0, "sat2": 8.0, "sat3": 2.0}
+    assert binding_limit(pts, 3.0) == "sat3"
+    assert binding_limit(pts, 1.5) == "sat3"  # the first sample at or above 1.5 Hz is 2 Hz
+    assert binding_limit(pts, 0.5) is None
+    assert binding_limit(pts[:1], float("nan")) is None
+    assert binding_limit(pts[2:], float("nan")) == "sat1"
 
 
 def test_distortion_grows_with_the_dead_band():
