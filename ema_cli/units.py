@@ -26,3 +26,38 @@ def rpm_to_rad_s(x: float) -> float:
 def rad_s_to_rpm(x):
     """rad/s -> rpm (works on floats and arrays)."""
     return x / RPM
+
+
+# Units a user may write at the edges (acceptance limits): name -> (dimension, SI per unit).
+# SI dimensions: time s, angle rad, frequency Hz, rate rad/s, stiffness N*m/rad, current A,
+# torque N*m; percent and dB are their own.
+UNITS: dict[str, tuple[str, float]] = {
+    "s": ("time", 1.0), "ms": ("time", 1e-3),
+    "rad": ("angle", 1.0), "mrad": ("angle", 1e-3), "deg": ("angle", DEG),
+    "arcmin": ("angle", DEG / 60.0), "arcsec": ("angle", DEG / 3600.0),
+    "Hz": ("frequency", 1.0),
+    "rad/s": ("rate", 1.0), "deg/s": ("rate", DEG), "rpm": ("rate", RPM),
+    "N*m/rad": ("stiffness", 1.0), "N*m/deg": ("stiffness", 1.0 / DEG),
+    "kN*m/rad": ("stiffness", 1e3),
+    "A": ("current", 1.0), "N*m": ("torque", 1.0),
+    "%": ("percent", 1.0), "dB": ("decibel", 1.0),
+}
+SI_UNIT = {"time": "s", "angle": "rad", "frequency": "Hz", "rate": "rad/s",
+           "stiffness": "N*m/rad", "current": "A", "torque": "N*m", "percent": "%",
+           "decibel": "dB"}
+"""The SI (internal) unit of each dimension."""
+
+
+def units_of(dimension: str) -> list[str]:
+    """The unit names of one dimension."""
+    return [u for u, (d, _) in UNITS.items() if d == dimension]
+
+
+def to_si(value: float, unit: str) -> float:
+    """``value`` in ``unit`` (a key of :data:`UNITS`) -> SI."""
+    return value * UNITS[unit][1]
+
+
+def from_si(value: float, unit: str) -> float:
+    """An SI value -> ``unit`` (a key of :data:`UNITS`)."""
+    return value / UNITS[unit][1]

@@ -16,8 +16,9 @@ the results (``FreqPoint``).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -65,24 +66,17 @@ def _bin(y: np.ndarray, k: int) -> complex:
     return 2.0 / n * complex(np.dot(y, np.exp(-2j * math.pi * k * np.arange(n) / n)))
 
 
-def sinestream(params: Mapping[str, float], amplitudes_deg: Sequence[float],
-               freqs_hz: Sequence[float], dt: float = 1e-5,
-               parallel: bool = True) -> list[FreqPoint]:
-    """Simulate the sinestream of the SI parameters ``params`` -> one point per amplitude and
-    frequency (amplitude-major)."""
+def _windows(params: Mapping[str, float], freqs_hz: Sequence[float], n_cases: int,
+             make_refs: Callable[[float], list[Any]], dt: float, parallel: bool,
+             ) -> Iterator[tuple[int, float, np.ndarray, np.ndarray]]:
+    """Run each frequency's batch (``make_refs(f)`` -> one signal per case) and yield
+    (frequency index, snapped frequency [Hz], measured window ``signals[case, sample, col]``,
+    diverged[case])."""
     from ema_cli.model.params import to_row
     from ema_cli.sim.runner import simulate_batch
-    from ema_cli.sim.signals import InputSignal
 
-    amps = [float(a) for a in amplitudes_deg]
-    if not amps or any(not (math.isfinite(a) and a > 0) for a in amps):
-        raise EmaError(f"amplitudes must be finite numbers > 0 [deg], got {amplitudes_deg}")
-    freqs = [float(f) for f in freqs_hz]
-    if not freqs or any(not (math.isfinite(f) and f > 0) for f in freqs):
-        raise EmaError(f"frequencies must be finite numbers > 0 [Hz], got {freqs_hz}")
     row = to_row(params)
-    out: dict[tuple[int, int], FreqPoint] = {}
-    for j, f_req in enumerate(freqs):
+    for j, f_req in enumerate(freqs_hz):
         f, dec, spp = snap_frequency(f_req, dt)
         if dec * spp < 8 * (HARMONICS + 1):
             raise EmaError(f"{f_req:g} Hz is too fast for dt = {dt:g} s (a period needs "
@@ -90,31 +84,98 @@ def sinestream(params: Mapping[str, float], amplitudes_deg: Sequence[float],
         period_steps = dec * spp
         settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * f))
         n_steps = (settle + MEASURE_PERIODS) * period_steps
-        refs = [InputSignal(kind="sine", amplitude=a * DEG, freq=f) for a in amps]
-        P = np.array([row] * len(amps))
-        res = simulate_batch(P, refs, np.arange(len(amps)), dt, n_steps, dec,
+        P = np.array([row] * n_cases)
+        res = simulate_batch(P, make_refs(f), np.arange(n_cases), dt, n_steps, dec,
                              parallel=parallel)
         first = settle * spp
-        last = first + MEASURE_PERIODS * spp
+        yield j, f, res.signals[:, first:first + MEASURE_PERIODS * spp], res.diverged
+
+
+def _check_positive(values: Sequence[float], what: str, unit: str) -> list[float]:
+    out = [float(v) for v in values]
+    if not out or any(not (math.isfinite(v) and v > 0) for v in out):
+        raise EmaError(f"{what} must be finite numbers > 0 [{unit}], got {list(values)}")
+    return out
+
+
+def sinestream(params: Mapping[str, float], amplitudes_deg: Sequence[float],
+               freqs_hz: Sequence[float], dt: float = 1e-5,
+               parallel: bool = True) -> list[FreqPoint]:
+    """Simulate the sinestream of the SI parameters ``params`` -> one point per amplitude and
+    frequency (amplitude-major)."""
+    from ema_cli.sim.signals import InputSignal
+
+    amps = _check_positive(amplitudes_deg, "amplitudes", "deg")
+    freqs = _check_positive(freqs_hz, "frequencies", "Hz")
+    out: dict[tuple[int, int], FreqPoint] = {}
+    refs = lambda f: [InputSignal(kind="sine", amplitude=a * DEG, freq=f)  # noqa: E731
+                      for a in amps]
+    for j, f, win, diverged in _windows(params, freqs, len(amps), refs, dt, parallel):
         for i, a in enumerate(amps):
-            sig = res.signals[i, first:last]
-            r1 = _bin(sig[:, _COL["theta_ref"]], MEASURE_PERIODS)
+            sig = win[i]
             y = sig[:, _COL["theta_load"]]
             y1 = _bin(y, MEASURE_PERIODS)
-            h = y1 / r1
-            harm = [_bin(y, MEASURE_PERIODS * k) for k in range(2, HARMONICS + 1)]
-            thd = 100.0 * math.sqrt(sum(abs(x) ** 2 for x in harm)) / abs(y1) if y1 else math.inf
-            out[(i, j)] = FreqPoint(a, f, 20.0 * math.log10(abs(h)),
-                                    math.degrees(math.atan2(h.imag, h.real)), thd,
-                                    _limits(params, sig), bool(res.diverged[i]))
+            h = y1 / _bin(sig[:, _COL["theta_ref"]], MEASURE_PERIODS)
+            moved = abs(h) > 0.0  # a load that never leaves a dead band has no response
+            out[(i, j)] = FreqPoint(a, f, 20.0 * math.log10(abs(h)) if moved else -math.inf,
+                                    math.degrees(math.atan2(h.imag, h.real)) if moved
+                                    else math.nan, _thd(y, y1),
+                                    _limits(params, sig), bool(diverged[i]))
     points = [out[(i, j)] for i in range(len(amps)) for j in range(len(freqs))]
     return _unwrap(points, len(freqs))
+
+
+def _thd(y: np.ndarray, y1: complex) -> float:
+    """Total harmonic distortion of ``y`` [%] (harmonics 2..HARMONICS of the measured
+    window's fundamental ``y1``)."""
+    harm = [_bin(y, MEASURE_PERIODS * k) for k in range(2, HARMONICS + 1)]
+    return 100.0 * math.sqrt(sum(abs(x) ** 2 for x in harm)) / abs(y1) if y1 else math.inf
+
+
+@dataclass(frozen=True)
+class CompliancePoint:
+    """One frequency of a load-torque sinestream in closed loop: the compliance
+    ``theta_L / T_load`` [rad/(N*m)] (complex), the dynamic stiffness ``|T_load / theta_L|``
+    [N*m/rad], the distortion of the load angle [%] and the limits reached."""
+
+    f_hz: float
+    compliance: complex
+    thd_pct: float
+    limits: tuple[str, ...]
+    diverged: bool
+
+    @property
+    def stiffness(self) -> float:
+        return 1.0 / abs(self.compliance) if self.compliance else math.inf
+
+
+def compliance_stream(params: Mapping[str, float], amplitude_nm: float,
+                      freqs_hz: Sequence[float], dt: float = 1e-5,
+                      parallel: bool = True) -> list[CompliancePoint]:
+    """The closed-loop response of the load angle to a sine load torque ``amplitude_nm``
+    [N*m] at each frequency (position reference held at 0), one kernel batch for all."""
+    from ema_cli.sim.signals import InputSignal
+
+    (amp,) = _check_positive([amplitude_nm], "the load-torque amplitude", "N*m")
+    freqs = _check_positive(freqs_hz, "frequencies", "Hz")
+    out = []
+    for _, f, win, diverged in _windows(
+            params, freqs, 1, lambda f: [InputSignal(kind="step", amplitude=0.0,
+                                                      load_sine=(amp, f))], dt, parallel):
+        sig = win[0]
+        y = sig[:, _COL["theta_load"]]
+        y1 = _bin(y, MEASURE_PERIODS)
+        c = y1 / _bin(sig[:, _COL["torque_load"]], MEASURE_PERIODS)
+        out.append(CompliancePoint(f, c, _thd(y, y1), _limits(params, sig), bool(diverged[0])))
+    return out
 
 
 def _limits(p: Mapping[str, float], sig: np.ndarray) -> tuple[str, ...]:
     """The saturations reached in the measured window (SAT1 from the position error)."""
     reached = []
-    e = sig[:, _COL["theta_ref"]] - sig[:, _COL["theta_load"]]
+    b = p.get("fb_motor", 0.0)  # the position fed back (docs/model.md: controller)
+    e = sig[:, _COL["theta_ref"]] - ((1.0 - b) * sig[:, _COL["theta_load"]]
+                                     + b * sig[:, _COL["theta_motor"]])
     if np.max(np.abs(p["Kpp"] * e)) >= p["sat1"] * (1 - LIMIT_TOL):
         reached.append("sat1")
     if np.max(np.abs(sig[:, _COL["voltage_cmd"]])) >= p["sat2"] * (1 - LIMIT_TOL):
@@ -125,11 +186,14 @@ def _limits(p: Mapping[str, float], sig: np.ndarray) -> tuple[str, ...]:
 
 
 def _unwrap(points: list[FreqPoint], n_freq: int) -> list[FreqPoint]:
-    """Phases continuous along frequency within each amplitude (starting in (-180, 180])."""
+    """Phases continuous along frequency within each amplitude (starting in (-180, 180]),
+    NaN phases (no response) skipped."""
     out = []
     for start in range(0, len(points), n_freq):
         block = points[start:start + n_freq]
-        phase = np.degrees(np.unwrap(np.radians([p.phase_deg for p in block])))
+        phase = np.array([p.phase_deg for p in block])
+        ok = np.isfinite(phase)  # NaN where the load did not move: left out of the unwrapping
+        phase[ok] = np.degrees(np.unwrap(np.radians(phase[ok])))
         out += [FreqPoint(p.amplitude_deg, p.f_hz, p.gain_db, float(ph), p.thd_pct, p.limits,
                           p.diverged) for p, ph in zip(block, phase, strict=True)]
     return out
@@ -142,15 +206,17 @@ LIMIT_NAMES = {"sat1": "SAT1 load-speed command (rate limit)", "sat2": "SAT2 vol
 
 def limit_amplitudes(params: Mapping[str, float], f_hz: np.ndarray) -> dict[str, np.ndarray]:
     """The linear model's estimate of the reference amplitude [deg] at which each saturation is
-    first reached by a sine of frequency ``f_hz`` [Hz]: SAT1 ``sat1/(Kpp |1 - H|)`` (the
-    position error), SAT2 ``sat2/|U|`` (voltage demand), SAT3 ``sat3/|I|`` (current), where H,
-    U, I are the closed-loop responses of load angle, voltage demand and current to the
-    reference. Below these amplitudes the actuator is linear (no limit reached)."""
+    first reached by a sine of frequency ``f_hz`` [Hz]: SAT1 ``sat1/(Kpp |1 - H|)`` (H: the
+    response of the position fed back, so ``1 - H`` is the position error), SAT2 ``sat2/|U|``
+    (voltage demand), SAT3 ``sat3/|I|`` (current), U and I the closed-loop responses of the
+    voltage demand and the current to the reference. Below these amplitudes the actuator is
+    linear (no limit reached)."""
     from ema_cli.analysis.linear import linear_model
 
     ss = linear_model(params)
     f = np.atleast_1d(np.asarray(f_hz, dtype=float))
-    h = ss.response(f)
+    b = params.get("fb_motor", 0.0)  # the position fed back: (1-b)*theta_L + b*theta_m/m
+    h = (1.0 - b) * ss.response(f) + b / params["m"] * ss.response(f, out="theta_m")
     with np.errstate(divide="ignore"):
         return {
             "sat1": params["sat1"] / (params["Kpp"] * np.abs(1.0 - h)) / DEG,

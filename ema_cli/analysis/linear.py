@@ -17,9 +17,10 @@ w_m, i, u_dem]``:
     JL dw_L  = T - bL w_L - k_h theta_L + T_d
     dxI      = e_w
     T        = kL (theta_m/m - theta_L) + c (w_m/m - w_L)
-    u_dem    = Kps e_w + Kis xI,   e_w = m Kpp (theta_ref - theta_L) - w_m
+    u_dem    = Kps e_w + Kis xI,   e_w = m Kpp (theta_ref - theta_fb) - w_m
+    theta_fb = (1 - b) theta_L + b theta_m / m     (b = fb_motor: 0 load sensor, 1 motor)
 
-Loops are broken at their feedback (the measured load angle for the position loop, the
+Loops are broken at their feedback (the measured position theta_fb for the position loop, the
 measured motor speed for the speed loop) with the other loop closed; the loop transfer is
 ``L(s) = -(return at the break)/(injection)``, so the closed loop is stable when the Nyquist
 curve of ``L`` obeys the usual criterion and ``1 + L`` is the return difference.
@@ -125,10 +126,12 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
     ew_x = np.zeros(6)
     ew_v = 0.0
     ew_r = m * Kpp
+    b = float(params.get("fb_motor", 0.0))  # position fed back: (1-b)*theta_L + b*theta_m/m
     if broken == "position":
         ew_v = -m * Kpp
     else:
-        ew_x[3] = -m * Kpp
+        ew_x[3] = -m * Kpp * (1.0 - b)
+        ew_x[0] = -Kpp * b
     if broken == "speed":
         ew_v = -1.0
     else:
@@ -150,9 +153,12 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
         D = np.zeros((6, 2))
         D[5, 0] = Kps * ew_r
         return StateSpace(Acl, B, C, D, STATE_NAMES, INPUT_NAMES, OUTPUT_NAMES)
-    ret = STATE_NAMES.index("theta_L" if broken == "position" else "w_m")
     Cr = np.zeros((1, 6))
-    Cr[0, ret] = 1.0
+    if broken == "position":
+        Cr[0, STATE_NAMES.index("theta_L")] = 1.0 - b
+        Cr[0, STATE_NAMES.index("theta_m")] = b / m
+    else:
+        Cr[0, STATE_NAMES.index("w_m")] = 1.0
     return StateSpace(Acl, col_v[:, None], Cr, np.zeros((1, 1)), STATE_NAMES, ("v",),
                       ("return",))
 

@@ -1,6 +1,6 @@
 """The Python API: what the ``ema`` commands do, for notebooks and scripts.
 
-    >>> from ema_cli.api import simulate, sweep, identify, threshold
+    >>> from ema_cli.api import simulate, sweep, identify, threshold, acceptance
     >>> run = simulate(nl={"deadzone2": 0.01})           # or simulate("configs/x.yaml", {...})
     >>> run.metrics                                       # one-row DataFrame, edge units
     >>> run.signal("theta_load_deg")                      # numpy array [deg] at run.t [s]
@@ -17,6 +17,7 @@ load when first needed.
 
 from __future__ import annotations
 
+from ema_cli.api.acceptance import AcceptanceResult, acceptance
 from ema_cli.api.freqresp import FrequencyResponse, freqresp
 from ema_cli.api.identification import Identification, identify
 from ema_cli.api.margins import LoopMargins, margins
@@ -25,6 +26,6 @@ from ema_cli.api.study import Sweep, sweep
 from ema_cli.api.threshold import Threshold, threshold
 from ema_cli.errors import EmaError
 
-__all__ = ["EmaError", "FrequencyResponse", "Identification", "LoopMargins", "Simulation",
-           "Sweep", "Threshold", "freqresp", "identify", "margins", "simulate", "sweep",
-           "threshold"]
+__all__ = ["AcceptanceResult", "EmaError", "FrequencyResponse", "Identification",
+           "LoopMargins", "Simulation", "Sweep", "Threshold", "acceptance", "freqresp",
+           "identify", "margins", "simulate", "sweep", "threshold"]

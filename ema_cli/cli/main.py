@@ -11,6 +11,7 @@ import typer
 
 from ema_cli import __version__
 from ema_cli.cli import (
+    acceptance,
     freqresp,
     identify,
     locations,
@@ -53,6 +54,7 @@ COMMANDS = (
     ("threshold", threshold.threshold_cmd),
     ("margins", margins.margins_cmd),
     ("freqresp", freqresp.freqresp_cmd),
+    ("acceptance", acceptance.acceptance_cmd),
     ("identify", identify.identify_cmd),
     ("reproduce", reproduce.reproduce_cmd),
     ("locations", locations.locations_cmd),
@@ -65,7 +67,7 @@ for _name, _fn in COMMANDS:
 
 
 FAST_EXIT = frozenset({"simulate", "validate", "show", "threshold", "margins", "freqresp",
-                       "locations", "params"})
+                       "acceptance", "locations", "params"})
 """Commands that start no worker processes: once they have finished (every file written and
 closed, output flushed) the process ends at once. The interpreter's own teardown of numba,
 LLVM and matplotlib takes ~0.45 s and does nothing these commands need; commands that may start

@@ -143,11 +143,31 @@ class MotorConfig(Strict):
 
 
 class ControllerConfig(Strict):
-    """Controller options: continuous (default) or digital with a sample time."""
+    """Controller options: continuous (default) or digital with a sample time; the position
+    fed back (load sensor, motor angle / ratio, or a blend)."""
 
     sample_time_s: PositiveFloat | None = Field(
         None, description="digital controller sample time [s], a whole multiple of "
                                 "simulation.dt_s (absent: continuous)")
+    position_feedback: Literal["load", "motor", "blend"] = Field(
+        "load", description="position fed back: load (load-angle sensor), motor (motor angle "
+                            "/ gear ratio: the transmission's free play is outside the loop), "
+                            "blend ((1-b)*load + b*motor, b = feedback_blend)")
+    feedback_blend: FiniteFloat | None = Field(
+        None, ge=0.0, le=1.0, description="b of position_feedback: blend, in [0, 1]")
+
+    @model_validator(mode="after")
+    def _blend(self) -> ControllerConfig:
+        if self.position_feedback == "blend" and self.feedback_blend is None:
+            raise ValueError("position_feedback: blend needs feedback_blend (b in [0, 1])")
+        if self.position_feedback != "blend" and self.feedback_blend is not None:
+            raise ValueError(f"feedback_blend is used only with position_feedback: blend, not "
+                             f"{self.position_feedback}")
+        return self
+
+    def blend(self) -> float | None:
+        """The blend b the kernel sees (None: the default, load feedback)."""
+        return {"load": None, "motor": 1.0, "blend": self.feedback_blend}[self.position_feedback]
 
 
 class SensorsConfig(Strict):
@@ -161,7 +181,8 @@ class SensorsConfig(Strict):
 
 SECTION_PARAMS = {
     "load.torque_nm": "T_load", "load.spring_nm_per_rad": "k_h", "motor.locked": "locked",
-    "controller.sample_time_s": "Ts", "sensors.position_counts_per_rev": "q_pos",
+    "controller.sample_time_s": "Ts", "controller.position_feedback": "fb_motor",
+    "sensors.position_counts_per_rev": "q_pos",
     "sensors.speed_resolution_rpm": "q_speed",
 }
 """Config settings that set a model parameter (``config path -> parameter``)."""
@@ -211,6 +232,8 @@ class RunConfig(Strict):
             out["locked"] = 1.0
         if self.controller.sample_time_s is not None:
             out["Ts"] = self.controller.sample_time_s
+        if self.controller.blend() is not None:
+            out["fb_motor"] = self.controller.blend()
         if self.sensors.position_counts_per_rev is not None:
             out["q_pos"] = 2.0 * math.pi / self.sensors.position_counts_per_rev
         if self.sensors.speed_resolution_rpm is not None:
@@ -230,6 +253,10 @@ class RunConfig(Strict):
             parts.append("motor locked")
         if self.controller.sample_time_s is not None:
             parts.append(f"digital controller Ts {self.controller.sample_time_s * 1e3:g} ms")
+        if self.controller.position_feedback == "motor":
+            parts.append("motor-angle position feedback")
+        elif self.controller.position_feedback == "blend":
+            parts.append(f"blended position feedback b = {self.controller.feedback_blend:g}")
         if self.sensors.position_counts_per_rev is not None:
             parts.append(f"encoder {self.sensors.position_counts_per_rev:g} counts/rev")
         if self.sensors.speed_resolution_rpm is not None:
@@ -246,7 +273,7 @@ class RunConfig(Strict):
             section, key = path.split(".")
             part = getattr(self, section)
             if param in self.plant and (key in part.model_fields_set
-                                        or getattr(part, key) not in (None, 0.0, False)):
+                                        or getattr(part, key) not in (None, 0.0, False, "load")):
                 raise ValueError(f"{path} and plant.{param} set the same parameter; give one")
         for name, value in self.nonlinearities.items():  # a magnitude and plant.X of one param
             written = nonlinearity_updates(name, value, resolve(), self.friction_reading)

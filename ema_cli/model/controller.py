@@ -2,7 +2,8 @@
 
 ::
 
-    theta_meas = Q(DZ(theta_L, d4), q_pos)        w_meas = Q(DZ(w_m, d3), q_speed)
+    theta_meas = Q(DZ(theta_fb, d4), q_pos)       w_meas = Q(DZ(w_m, d3), q_speed)
+    theta_fb = (1 - b)*theta_L + b*theta_m/m      b = fb_motor: 0 load sensor, 1 motor angle
     w*_L  = SAT(Kpp*(theta_ref - theta_meas), sat1)                 [rad/s, load side]
     e_w   = m*w*_L - w_meas                                         [rad/s, motor side]
     u_dem = SAT(Kps*e_w + Kis*xI, sat2)                             [V]
@@ -21,11 +22,13 @@ from ema_cli.model.elements import dead_zone_nb, quantize_nb, saturate_nb
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
-def sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_q_pos, inv_q_speed):
-    """Measured load angle [rad] and motor speed [rad/s]: sensor dead zones (half-widths ``d4``
-    [rad], ``d3`` [rad/s]), then quantisers (quanta ``q_pos`` [rad], ``q_speed`` [rad/s], 0: none,
-    with their reciprocals)."""
-    return (quantize_nb(dead_zone_nb(th_l, d4), q_pos, inv_q_pos),
+def sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_q_pos, inv_q_speed, th_mm=0.0, fb=0.0):
+    """Measured position [rad] and motor speed [rad/s]: the position fed back is the load angle
+    ``th_l``, the motor angle over the ratio ``th_mm``, or the blend ``(1-fb)*th_l + fb*th_mm``;
+    sensor dead zones (half-widths ``d4`` [rad], ``d3`` [rad/s]), then quantisers (quanta
+    ``q_pos`` [rad], ``q_speed`` [rad/s], 0: none, with their reciprocals)."""
+    th_fb = th_l + fb * (th_mm - th_l) if fb != 0.0 else th_l
+    return (quantize_nb(dead_zone_nb(th_fb, d4), q_pos, inv_q_pos),
             quantize_nb(dead_zone_nb(w_m, d3), q_speed, inv_q_speed))
 
 

@@ -58,6 +58,8 @@ PARAMS: tuple[Param, ...] = (
     Param("Kpp", "1/s", 50.0, "position P gain (w*_L = Kpp*e_theta)"),
     Param("Kps", "V*s/rad", 0.15, "speed PI proportional gain (motor side)"),
     Param("Kis", "V/rad", 1.5, "speed PI integral gain"),
+    Param("fb_motor", "-", 0.0, "position feedback blend b: theta_meas = (1-b)*theta_L + "
+          "b*theta_m/m (0: load sensor, 1: motor angle / m)"),
     # saturations (inf = removed)
     Param("sat1", "rad/s", 800.0 * DEG, "position-regulator output limit (load speed)"),
     Param("sat2", "V", 40.0, "speed-regulator output limit (voltage demand)"),
@@ -159,6 +161,9 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
         values["sigma1"] = 2.0 * BRISTLE_DAMPING_RATIO * math.sqrt(values["sigma0"] * values["Jm"])  # type: ignore[operator]
     if values["c"] is None:
         values["c"] = 2.0 * values["zeta_t"] * math.sqrt(values["kL"] * equivalent_inertia(values))  # type: ignore[arg-type,operator]
+    if values["fb_motor"] > 1.0:  # type: ignore[operator]
+        raise EmaError(f"parameter 'fb_motor' (position feedback blend) must lie in [0, 1], "
+                       f"got {values['fb_motor']}")
     for flag in FLAGS:
         if values[flag] not in (0.0, 1.0):
             raise EmaError(f"parameter '{flag}' must be 0/off or 1/on, got {values[flag]}")

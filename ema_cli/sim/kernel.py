@@ -74,6 +74,7 @@ _FRIC, _FC, _FS, _VS, _DELTA = (INDEX[k] for k in ("friction", "Fc", "Fs", "vs",
 _SIG0, _SIG1, _SIG2 = INDEX["sigma0"], INDEX["sigma1"], INDEX["sigma2"]
 _TLOAD, _KH, _LOCKED = INDEX["T_load"], INDEX["k_h"], INDEX["locked"]
 _TS, _QPOS, _QSPEED = INDEX["Ts"], INDEX["q_pos"], INDEX["q_speed"]
+_FB = INDEX["fb_motor"]
 
 # signal columns (W's recording rows, sig) and metric columns (met)
 _S_BRISTLE_Z = SIG["bristle_z"]
@@ -162,11 +163,12 @@ def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, l
     ``tf_b`` and held voltage ``uh`` given). ``prm`` is the tuple built by :func:`_lane_params`."""
     (m, inv_m, inv_l, inv_jm, inv_jl, r_a, kt, ke, bm, bl, kl, alpha, c, contact, kpp, kps, kis,
      sat1, sat2, sat3, d1, d3, d4, q_pos, q_speed, t_const, k_h, _, _, _, _, _, _, _, _, _, _,
-     _, _, _, _, inv_qp, inv_qs) = prm
+     _, _, _, _, inv_qp, inv_qs, fb) = prm
     if not extras:  # no quantisers (a constant at each call site)
         q_pos = 0.0
         q_speed = 0.0
-    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs)
+    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs,
+                                 th_m * inv_m, fb)
     e_w, u_unsat, u_dem = cascade_nb(r, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
     u = uh if disc else u_dem
     u_amp = 0.0 if locked else dead_zone_nb(u, d1)
@@ -192,7 +194,7 @@ def _lane_params(W, j):
             W[_FRIC, j] != 0.0, W[_FC, j], W[_FS, j], W[_VS, j], W[_DELTA, j], W[_SIG0, j],
             W[_SIG1, j], W[_SIG2, j], W[_D_NS, j], W[_TS, j], W[_LOCKED, j] != 0.0,
             W[_D_ISSTEP, j] != 0.0, W[_D_STEP, j], W[_D_TSTEP, j], W[_D_INVQP, j],
-            W[_D_INVQS, j])
+            W[_D_INVQS, j], W[_FB, j])
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -262,7 +264,7 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extra
     """
     (m, inv_m, _, _, _, _, _, _, _, _, kl, alpha, c, contact, kpp, kps, kis, sat1, sat2, sat3,
      d1, d3, d4, q_pos, q_speed, t_const, k_h, fr, fc, fs, vs, delta, sig0, sig1, sig2, ns, ts,
-     locked, is_step, step, t_step, inv_qp, inv_qs) = lp
+     locked, is_step, step, t_step, inv_qp, inv_qs, fb) = lp
     th_m, w_m, i, th_l, w_l, z, x_i = x
     (iae, ise, itae, iaev, isev, itaev, emax, evmax, ss, emin_o, emax_o, evmin_o, evmax_o, smax,
      t10, t50, t90, last_out, pki, pku, pkwl, pkt) = acc
@@ -286,7 +288,8 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extra
         tf_b = 0.0
         visc = 0.0
     # --- controller at t_k (digital: sample, hold, integrate)
-    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs)
+    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs,
+                                 th_m * inv_m, fb)
     e_w, u_unsat, u_dem = cascade_nb(r0, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
     disc = ns > 0.0
     sample = disc and cnt == 0.0

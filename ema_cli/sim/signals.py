@@ -40,6 +40,8 @@ class InputSignal:
     load_table external load-torque profile ((t [s], ...), (torque [N*m], ...)), linearly
               interpolated, its end values held outside it; None: no profile
     load_path  the CSV the profile came from (for reports)
+    load_sine  (amplitude [N*m], frequency [Hz]): a sine load torque ``A sin(2 pi f t)`` from
+              t = 0, added to the profile; None: none
 
     The signal carries every time-varying input of a run: the position reference and, when
     given, the load-torque profile (``plant.load_torque_nb``).
@@ -58,6 +60,7 @@ class InputSignal:
     load_table: tuple[tuple[float, ...], tuple[float, ...]] | None = field(default=None,
                                                                           repr=False)
     load_path: str | None = None
+    load_sine: tuple[float, float] | None = None
 
     def describe(self) -> str:
         """A short human description in the paper's units."""
@@ -212,6 +215,7 @@ class Sampler:
         self._load = None
         if sig.load_table is not None:
             self._load = (np.asarray(sig.load_table[0]), np.asarray(sig.load_table[1]))
+        self._load_sine = sig.load_sine
         # np.gradient (the CSV velocity) takes its formula from the whole grid
         self._uniform = _uniform_grid(self.dt, self.n_steps) if sig.kind == "csv" else True
         is_step = sig.kind == "step" and sig.amplitude != 0.0
@@ -220,7 +224,7 @@ class Sampler:
 
     @property
     def has_load(self) -> bool:
-        return self._load is not None
+        return self._load is not None or self._load_sine is not None
 
     def chunk(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The inputs of steps ``k0 <= k < k1`` (``0 <= k0 < k1 <= n_steps + 1``) ->
@@ -237,8 +241,13 @@ class Sampler:
             vel = np.ascontiguousarray(_velocity(self.signal, t, self.duration),
                                        dtype=np.float64)
         load = None
-        if self._load is not None:
-            load = np.ascontiguousarray(np.interp(th, *self._load), dtype=np.float64)
+        if self.has_load:
+            load = np.zeros_like(th)
+            if self._load is not None:
+                load += np.interp(th, *self._load)
+            if self._load_sine is not None:
+                amp, freq = self._load_sine
+                load += amp * np.sin(2.0 * math.pi * freq * th)
         return pos, vel, load
 
     def _csv_velocity(self, k0: int, k1: int) -> np.ndarray:

@@ -73,6 +73,8 @@ def signal_identity(sig: InputSignal) -> dict[str, Any]:
     data = dataclasses.asdict(sig)
     data.pop("path")
     data.pop("load_path")
+    if data["load_sine"] is None:  # absent unless used: the job keys of older runs stay valid
+        data.pop("load_sine")
     for key in ("table", "load_table"):
         table = data.pop(key)
         if table is not None:

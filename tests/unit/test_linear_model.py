@@ -17,13 +17,13 @@ from tests.conftest import LINEAR_OVERRIDES, run_rows
 from tests.system.test_linear_reference import linear_ss
 
 VARIANTS = [{}, {"kL": 300.0, "Kpp": 80.0}, {"Kps": 0.3, "Kis": 4.0, "zeta_t": 0.05},
-            {"k_h": 50.0, "bL": 0.1}]
+            {"k_h": 50.0, "bL": 0.1}, {"fb_motor": 1.0}, {"fb_motor": 0.4, "kL": 200.0}]
 
 
 @pytest.mark.parametrize("extra", VARIANTS)
 def test_reference_response_equals_the_hand_written_model(extra):
     p = resolve({**LINEAR_OVERRIDES, **extra})
-    hand = linear_ss(p) if not extra.get("k_h") else None
+    hand = linear_ss(p) if not (extra.get("k_h") or extra.get("fb_motor")) else None
     lm = linear_model(p)
     f = np.geomspace(0.1, 500, 60)
     ours = lm.response(f, "theta_ref", "theta_L")
@@ -35,8 +35,10 @@ def test_reference_response_equals_the_hand_written_model(extra):
         np.testing.assert_allclose(lm.B[:, 0], np.squeeze(hand.B), rtol=1e-12)
 
 
-def test_reference_step_matches_the_simulator():
-    p = resolve(LINEAR_OVERRIDES)
+@pytest.mark.parametrize("fb", [0.0, 0.5, 1.0])
+def test_reference_step_matches_the_simulator(fb):
+    # fb: the position fed back, (1-fb)*theta_L + fb*theta_m/m (controller.position_feedback)
+    p = resolve({**LINEAR_OVERRIDES, "fb_motor": fb, "kL": 250.0})
     step = 0.1 * DEG
     res = run_rows([p], InputSignal("step", step), duration=0.4, dt=1e-5, output_interval=1e-4)
     lm = linear_model(p)
@@ -74,6 +76,16 @@ def test_margins_equal_python_control(extra, loop):
         assert ours.f_gm_hz == pytest.approx(wcg / (2 * np.pi), rel=1e-6)
     else:  # no phase crossover in 1 mHz..100 kHz: python-control finds none that matters
         assert not np.isfinite(gm) or gm > 1e6 or wcg / (2 * np.pi) > 1e5
+
+
+def test_motor_feedback_moves_the_transmission_out_of_the_loop():
+    # with the loop closed on the motor angle, the position loop's margins no longer see the
+    # load resonance, and a stiffer or softer transmission changes them far less
+    soft, stiff = ({**LINEAR_OVERRIDES, "kL": k} for k in (150.0, 2000.0))
+    on_load = [margins(resolve(p), "position").pm_deg for p in (soft, stiff)]
+    on_motor = [margins(resolve({**p, "fb_motor": 1.0}), "position").pm_deg
+                for p in (soft, stiff)]
+    assert abs(on_motor[0] - on_motor[1]) < 0.2 * abs(on_load[0] - on_load[1])
 
 
 def test_the_loop_transfer_closes_to_the_closed_loop():

@@ -1,0 +1,1 @@
+"""The actuator acceptance battery (`ema acceptance`)."""

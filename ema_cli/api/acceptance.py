@@ -1,0 +1,176 @@
+"""``api.acceptance``: run an acceptance battery (a spec) on the actuator it names."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
+from ema_cli.errors import EmaError
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from ema_cli.acceptance.battery import TestRun, Verdict
+    from ema_cli.config.acceptance import AcceptanceSpec
+
+
+@dataclass
+class AcceptanceResult:
+    """A battery's outcome: one :class:`TestRun` per test, the PASS/FAIL rows (``verdicts``,
+    each measurement against its limit, in the limit's unit), the actuator's SI parameters."""
+
+    spec: AcceptanceSpec
+    source: str
+    runs: list[TestRun]
+    verdicts: list[Verdict]
+    params: dict[str, float]
+    wall_time_s: float
+    overrides: list[tuple[str, Any]] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        """Whether every limit of every test was met."""
+        return all(v.passed for v in self.verdicts)
+
+    @property
+    def failed(self) -> list[Verdict]:
+        return [v for v in self.verdicts if not v.passed]
+
+    @property
+    def title(self) -> str:
+        return f"{self.spec.name}: actuator acceptance"
+
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """acceptance.csv: one row per measurement with a limit."""
+        return self.to_pandas()
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """The PASS/FAIL table: test, kind, metric, condition, value, min, max, unit, passed,
+        value_si, si_unit, note (``wide``), or ``long`` (test, metric, condition, quantity,
+        value)."""
+        import dataclasses
+
+        import pandas as pd
+
+        df = pd.DataFrame([dataclasses.asdict(v) for v in self.verdicts])
+        if form == "wide":
+            return df
+        if form != "long":
+            raise EmaError(f"form must be 'wide' or 'long', got {form!r}")
+        return df.melt(id_vars=["test", "metric", "condition"], var_name="quantity",
+                       value_name="value")
+
+    def run(self, name: str) -> TestRun:
+        for r in self.runs:
+            if r.name == name:
+                return r
+        raise EmaError(f"no test {name!r}; tests: {', '.join(r.name for r in self.runs)}")
+
+    def plot(self, test: str | None = None) -> Figure:
+        """The figure of one test (default: the first)."""
+        from ema_cli.report.acceptance_report import test_figure
+
+        run = self.run(test) if test is not None else self.runs[0]
+        return test_figure(run, self.spec.tests[run.name], self.title)
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write acceptance.md, acceptance.csv, one figure per test, the spec and a manifest."""
+        import yaml
+
+        from ema_cli.hashing import content_hash
+        from ema_cli.report.acceptance_report import write_acceptance
+        from ema_cli.report.rundir import finish_output, prepare_output
+
+        spec_json = self.spec.model_dump(mode="json", by_alias=True)
+        out, _ = prepare_output("acceptance", f"acceptance-{self.spec.name}",
+                                content_hash({"spec": spec_json, "p": self.params}, 16),
+                                folder_arg(folder))
+        write_acceptance(out, yaml.safe_dump(spec_json, sort_keys=False), self,
+                         {"source": self.source, "wall_time_s": self.wall_time_s,
+                          "passed": self.passed, "parameters_si": self.params,
+                          "overrides": [[k, v] for k, v in self.overrides],
+                          "test_wall_s": {r.name: r.wall_s for r in self.runs}})
+        finish_output(out)
+        return out
+
+
+def _dotted(tree: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    """``{"controller": {"position_feedback": "motor"}}`` or ``{"controller.position_feedback":
+    "motor"}`` -> ``[("controller.position_feedback", "motor")]``."""
+    out: list[tuple[str, Any]] = []
+    for k, v in tree.items():
+        key = f"{prefix}{k}"
+        out += _dotted(v, key + ".") if isinstance(v, Mapping) and v else [(key, v)]
+    return out
+
+
+def _actuator_pairs(spec: AcceptanceSpec) -> list[tuple[str, Any]]:
+    act = spec.actuator
+    return ([(f"plant.{k}", v) for k, v in act.plant.items()]
+            + [(f"nonlinearities.{k}", v) for k, v in act.nonlinearities.items()])
+
+
+def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
+               only: Sequence[str] | None = None,
+               progress: Callable[[TestRun], None] | None = None) -> AcceptanceResult:
+    """Run the battery of ``spec`` (a YAML file, a dict or an :class:`AcceptanceSpec`;
+    ``overrides`` are dotted paths of the spec, e.g. ``actuator.plant.alpha``); ``only`` runs
+    the named tests; ``progress(run)`` is called after each test."""
+    import time
+
+    from ema_cli.acceptance.battery import run_test, verdicts
+    from ema_cli.config.acceptance import AcceptanceSpec
+    from ema_cli.config.loader import load_config, resolve_run
+    from ema_cli.config.study import StudyConfig
+
+    if spec is None:
+        raise EmaError("acceptance needs a spec (a YAML file such as configs/acceptance.yaml)")
+    pairs = override_pairs(overrides)
+    sp = load_config(spec, pairs, AcceptanceSpec)
+    names = list(sp.tests)
+    if only:
+        unknown = [n for n in only if n not in sp.tests]
+        if unknown:
+            raise EmaError(f"--only: no test {unknown[0]!r} in the spec; tests: "
+                           f"{', '.join(names)}")
+        names = [n for n in names if n in set(only)]
+    here = base_dir(spec)
+    act_source: Any = None
+    act_dir = here
+    if sp.actuator.config is not None:
+        act_source = (here / sp.actuator.config) if here is not None else Path(
+            sp.actuator.config)
+        if not act_source.is_file():
+            raise EmaError(f"actuator.config: '{sp.actuator.config}' is not a file (a run "
+                           "config, relative to the spec)")
+        act_dir = act_source.parent
+    base_pairs = _actuator_pairs(sp)
+
+    def resolved(extra: list[tuple[str, Any]], where: str) -> tuple[dict[str, float], float]:
+        try:
+            cfg = load_config(act_source, base_pairs + extra, StudyConfig)
+        except EmaError as exc:
+            raise EmaError(f"{where}: {exc}") from None
+        run = resolve_run(cfg, act_dir)
+        return run.params, run.dt
+
+    params, dt = resolved([], "actuator")
+    t0 = time.perf_counter()
+    runs = []
+    rows = []
+    for name in names:
+        test = sp.tests[name]
+        p, d = (params, dt) if not test.overrides else resolved(
+            _dotted(test.overrides), f"tests.{name}.set")
+        run = run_test(name, test, p, d)
+        runs.append(run)
+        rows += verdicts(run, test.limits)
+        if progress is not None:
+            progress(run)
+    return AcceptanceResult(sp, str(spec) if isinstance(spec, str | Path) else "dict", runs,
+                            rows, params, time.perf_counter() - t0, pairs)

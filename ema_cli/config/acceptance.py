@@ -1,0 +1,295 @@
+"""Schema of an acceptance spec (``ema acceptance SPEC.yaml``, e.g. configs/acceptance.yaml).
+
+A spec names the actuator under test (a run config and SI overrides) and a battery of tests,
+each a mapping entry ``NAME: {test: KIND, ...settings, limits: {METRIC: {min|max, unit}}}``.
+Every limit carries its unit, checked against the metric's dimension (a time limit in ``deg``
+is an error) and converted to SI here, once (:data:`ema_cli.units.UNITS`).
+
+Test kinds and their metrics (dimension):
+
+=================== ===============================================================
+step                rise_time (time), overshoot (percent), settling_time (time),
+                    steady_state_error (angle), peak_current (current)
+frequency_response  bandwidth (frequency), phase_lag (angle, at ``phase_at_hz``),
+                    peak_gain (decibel); each at every amplitude of ``amplitudes_deg``
+margins             gain_margin (decibel), phase_margin (angle); each loop of ``loops``
+threshold           threshold (angle)
+hysteresis          hysteresis (angle), free_play (angle)
+load_deflection     stiffness (stiffness), free_play (angle)
+dynamic_stiffness   dynamic_stiffness (stiffness)
+no_load_rate        rate (rate)
+=================== ===============================================================
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+
+from ema_cli.config.base import FiniteFloat, PlainName, PositiveFloat, PositiveInt, Strict
+from ema_cli.config.run import KEY_MARK
+from ema_cli.units import SI_UNIT, UNITS, units_of
+
+METRICS: dict[str, dict[str, str]] = {
+    "step": {"rise_time": "time", "overshoot": "percent", "settling_time": "time",
+             "steady_state_error": "angle", "peak_current": "current"},
+    "frequency_response": {"bandwidth": "frequency", "phase_lag": "angle",
+                           "peak_gain": "decibel"},
+    "margins": {"gain_margin": "decibel", "phase_margin": "angle"},
+    "threshold": {"threshold": "angle"},
+    "hysteresis": {"hysteresis": "angle", "free_play": "angle"},
+    "load_deflection": {"stiffness": "stiffness", "free_play": "angle"},
+    "dynamic_stiffness": {"dynamic_stiffness": "stiffness"},
+    "no_load_rate": {"rate": "rate"},
+}
+"""The metrics of each test kind and their dimensions."""
+MAX_TESTS = 50  # tests in one spec, at most [-]
+MAX_DURATION_S = 120.0  # simulated duration of one test run, at most [s]
+
+
+class Limit(Strict):
+    """A limit on one metric: ``min`` and/or ``max`` in ``unit``."""
+
+    min: FiniteFloat | None = Field(None, description="the value must be >= min")
+    max: FiniteFloat | None = Field(None, description="the value must be <= max")
+    unit: str | None = Field(None, description="unit of min and max, e.g. s, ms, deg, Hz, dB, "
+                                                "%, deg/s, N*m/rad (required)")
+
+    @field_validator("unit")
+    @classmethod
+    def _unit(cls, v: str | None) -> str:
+        if v is None:
+            raise ValueError(f"a limit needs its unit, one of {', '.join(UNITS)}")
+        if v not in UNITS:
+            raise ValueError(f"unknown unit {v!r}; expected one of {', '.join(UNITS)}")
+        return v
+
+    @model_validator(mode="after")
+    def _bounds(self) -> Limit:
+        if self.unit is None:
+            raise _at("unit", f"missing: the unit of min/max, one of {', '.join(UNITS)}")
+        if self.min is None and self.max is None:
+            raise ValueError("a limit needs min or max (or both)")
+        if self.min is not None and self.max is not None and self.min > self.max:
+            raise ValueError(f"min ({self.min}) is above max ({self.max})")
+        return self
+
+    @property
+    def dimension(self) -> str:
+        return UNITS[self.unit][0]
+
+    def si(self) -> tuple[float, float]:
+        """(lower, upper) bounds in SI (-inf/inf where not given)."""
+        f = UNITS[self.unit][1]
+        return (-math.inf if self.min is None else self.min * f,
+                math.inf if self.max is None else self.max * f)
+
+
+def _at(key: str, message: str) -> ValueError:
+    """A validation error at ``key`` below the failing model (named in the message)."""
+    return ValueError(f"{KEY_MARK}{key}{KEY_MARK}{message}")
+
+
+def _article(word: str) -> str:
+    return "an" if word[0] in "aeiou" else "a"
+
+
+class _Test(Strict):
+    limits: dict[str, Limit] = Field(description="metric -> limit; at least one")
+    overrides: dict[str, Any] = Field(
+        default_factory=dict, alias="set",
+        description="actuator settings for this test only, by dotted path of the run config "
+                    "(e.g. controller.position_feedback: motor)")
+
+    @model_validator(mode="after")
+    def _limits(self) -> _Test:
+        kind = self.test  # type: ignore[attr-defined]
+        known = METRICS[kind]
+        if not self.limits:
+            raise _at("limits", f"a {kind} test needs at least one limit; its metrics: "
+                                f"{', '.join(known)}")
+        for metric, lim in self.limits.items():
+            if metric not in known:
+                raise _at(f"limits.{metric}", f"unknown metric for a {kind} test; expected "
+                                              f"one of {', '.join(known)}")
+            dim = known[metric]
+            if lim.dimension != dim:
+                raise _at(f"limits.{metric}.unit",
+                          f"{lim.unit!r} is a unit of {lim.dimension}, {metric} is "
+                          f"{_article(dim)} {dim}; expected one of {', '.join(units_of(dim))}")
+        return self
+
+
+class StepTest(_Test):
+    """A step of the position reference; the kernel's step metrics."""
+
+    test: Literal["step"]
+    amplitude_deg: FiniteFloat = Field(description="step size [deg], load side (not 0)")
+    duration_s: PositiveFloat = Field(1.0, le=MAX_DURATION_S, description="[s]")
+
+    @field_validator("amplitude_deg")
+    @classmethod
+    def _nonzero(cls, v: float) -> float:
+        if v == 0:
+            raise ValueError("a step needs a nonzero amplitude [deg]")
+        return v
+
+
+class FrequencyResponseTest(_Test):
+    """A sinestream at each amplitude: -3 dB bandwidth, phase lag at a frequency, peak gain."""
+
+    test: Literal["frequency_response"]
+    amplitudes_deg: list[PositiveFloat] = Field(min_length=1, max_length=10)
+    f_min_hz: PositiveFloat = 0.5
+    f_max_hz: PositiveFloat = 50.0
+    n: PositiveInt = Field(20, ge=2, le=200, description="log-spaced frequencies")
+    phase_at_hz: PositiveFloat | None = Field(None, description="frequency of phase_lag [Hz]")
+
+    @model_validator(mode="after")
+    def _range(self) -> FrequencyResponseTest:
+        if not self.f_min_hz < self.f_max_hz:
+            raise ValueError(f"f_min_hz ({self.f_min_hz}) must be below f_max_hz "
+                             f"({self.f_max_hz})")
+        if "phase_lag" in self.limits and self.phase_at_hz is None:
+            raise ValueError("a phase_lag limit needs phase_at_hz (the frequency [Hz])")
+        if self.phase_at_hz is not None and not (self.f_min_hz <= self.phase_at_hz
+                                                 <= self.f_max_hz):
+            raise ValueError(f"phase_at_hz ({self.phase_at_hz}) must lie within f_min_hz.."
+                             f"f_max_hz ({self.f_min_hz}..{self.f_max_hz})")
+        return self
+
+
+class MarginsTest(_Test):
+    """Gain and phase margins of the linear limit, each loop broken in turn."""
+
+    test: Literal["margins"]
+    loops: list[Literal["position", "speed"]] = Field(["position", "speed"], min_length=1)
+
+
+class ThresholdTest(_Test):
+    """The smallest step the load follows to ``fraction`` of its size within ``within_s``."""
+
+    test: Literal["threshold"]
+    fraction: PositiveFloat = Field(0.5, le=1.0, description="share of the step to reach")
+    within_s: PositiveFloat = Field(0.5, le=MAX_DURATION_S, description="[s]")
+    search_deg: tuple[PositiveFloat, PositiveFloat] = Field(
+        (1e-4, 1.0), description="LO < HI: the bisection's bracket [deg]")
+    rtol: PositiveFloat = Field(0.01, le=0.5, description="relative resolution of the result")
+
+    @field_validator("search_deg")
+    @classmethod
+    def _bracket(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not v[0] < v[1]:
+            raise ValueError(f"search_deg needs LO < HI, got {list(v)}")
+        return v
+
+
+class HysteresisTest(_Test):
+    """A slow triangle command (0 -> +A -> -A -> 0 per period), measured on the last cycle."""
+
+    test: Literal["hysteresis"]
+    amplitude_deg: PositiveFloat = 2.0
+    period_s: PositiveFloat = Field(8.0, le=MAX_DURATION_S)
+    cycles: PositiveInt = Field(2, ge=2, le=10)
+
+    @model_validator(mode="after")
+    def _length(self) -> HysteresisTest:
+        if self.period_s * self.cycles > MAX_DURATION_S:
+            raise ValueError(f"period_s x cycles = {self.period_s * self.cycles:g} s is longer "
+                             f"than {MAX_DURATION_S:g} s")
+        return self
+
+
+class LoadDeflectionTest(_Test):
+    """Motor locked; a slow load-torque triangle 0 -> +T -> -T -> 0 over ``period_s``."""
+
+    test: Literal["load_deflection"]
+    torque_nm: PositiveFloat = Field(description="peak load torque [N*m]")
+    period_s: PositiveFloat = Field(6.0, le=MAX_DURATION_S)
+    fit_fraction: PositiveFloat = Field(
+        0.25, lt=1.0, description="the lines are fitted where |T| >= this share of the peak")
+
+
+class DynamicStiffnessTest(_Test):
+    """A sine load torque, closed loop: min over frequency of |T / theta_L|."""
+
+    test: Literal["dynamic_stiffness"]
+    amplitude_nm: PositiveFloat = 1.0
+    f_min_hz: PositiveFloat = 0.5
+    f_max_hz: PositiveFloat = 50.0
+    n: PositiveInt = Field(20, ge=2, le=200)
+
+    @model_validator(mode="after")
+    def _range(self) -> DynamicStiffnessTest:
+        if not self.f_min_hz < self.f_max_hz:
+            raise ValueError(f"f_min_hz ({self.f_min_hz}) must be below f_max_hz "
+                             f"({self.f_max_hz})")
+        return self
+
+
+class NoLoadRateTest(_Test):
+    """The peak load rate on a large step, no load."""
+
+    test: Literal["no_load_rate"]
+    amplitude_deg: PositiveFloat = 40.0
+    duration_s: PositiveFloat = Field(1.0, le=MAX_DURATION_S)
+
+
+_KINDS = {"step": StepTest, "frequency_response": FrequencyResponseTest, "margins": MarginsTest,
+          "threshold": ThresholdTest, "hysteresis": HysteresisTest,
+          "load_deflection": LoadDeflectionTest, "dynamic_stiffness": DynamicStiffnessTest,
+          "no_load_rate": NoLoadRateTest}
+
+
+def _tag(v: Any) -> str:
+    """The union tag of a test entry, ``test[KIND]`` (a ``loc`` element the loader drops)."""
+    kind = v.get("test") if isinstance(v, dict) else getattr(v, "test", None)
+    return f"test[{kind}]"
+
+
+TestSpec = Annotated[Union[tuple(Annotated[cls, Tag(f"test[{k}]")]  # noqa: UP007
+                                 for k, cls in _KINDS.items())], Discriminator(_tag)]
+
+
+class ActuatorSpec(Strict):
+    """The actuator under test: a run config and overrides on top of it."""
+
+    config: str | None = Field(None, description="run config, relative to the spec (null: "
+                                                 "the bundled defaults)")
+    plant: dict[str, FiniteFloat] = Field(default_factory=dict,
+                                          description="SI parameter overrides (`ema params`)")
+    nonlinearities: dict[str, Any] = Field(
+        default_factory=dict, description="name -> magnitude (`ema locations`)")
+
+
+class AcceptanceSpec(Strict):
+    """An acceptance battery: the actuator and its tests."""
+
+    name: PlainName
+    description: str = ""
+    actuator: ActuatorSpec = Field(default_factory=ActuatorSpec)
+    tests: dict[PlainName, TestSpec] = Field(min_length=1, max_length=MAX_TESTS)
+
+    @field_validator("tests", mode="before")
+    @classmethod
+    def _kinds(cls, v: Any) -> Any:
+        if isinstance(v, dict):
+            for name, entry in v.items():
+                if not isinstance(entry, dict):
+                    raise _at(name, "expected a mapping with test: KIND, its settings and "
+                                    "limits")
+                if "test" not in entry:
+                    raise _at(f"{name}.test", f"missing: the test kind, one of "
+                                              f"{', '.join(METRICS)}")
+                if entry["test"] not in METRICS:
+                    raise _at(f"{name}.test", f"unknown test {entry['test']!r}; expected one "
+                                              f"of {', '.join(METRICS)}")
+        return v
+
+    def si_unit(self, test: str, metric: str) -> str:
+        return SI_UNIT[METRICS[self.tests[test].test][metric]]
+
+
+TEST_KINDS = tuple(METRICS)

@@ -1,0 +1,237 @@
+"""``ema acceptance``: acceptance.md (PASS/FAIL table), acceptance.csv, one figure per test."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ema_cli.report.figures import subplots
+from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
+from ema_cli.units import DEG, from_si
+
+
+def _lines(ax: Any, title: str, xlabel: str, ylabel: str) -> None:
+    ax.set_title(title)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
+
+
+def _limit_line(ax: Any, limit: Any, unit: str, horizontal: bool = True) -> None:
+    """Dotted lines at a limit's min/max converted to ``unit``."""
+    if limit is None:
+        return
+    lo, hi = limit.si()
+    for v, word in ((lo, "min"), (hi, "max")):
+        if math.isfinite(v):
+            x = from_si(v, unit)
+            (ax.axhline if horizontal else ax.axvline)(x, color="C3", ls=":", lw=1.2,
+                                                       label=f"limit ({word}) {x:.4g} {unit}")
+
+
+def _step(run: Any, test: Any, title: str) -> Figure:
+    d = run.data
+    fig, ax = subplots(1, 1, figsize=(9, 5))
+    ax.plot(d["t"], d["ref"] / DEG, "k--", lw=1.2, label="command")
+    ax.plot(d["t"], d["load"] / DEG, "C0", lw=1.4, label="load angle")
+    a = d["amplitude_deg"]
+    ax.axhspan(a * 0.98, a * 1.02, color="C2", alpha=0.15, label="2 % settling band")
+    _lines(ax, f"{title}\n{run.name}: {a:g} deg step", "time [s]", "position [deg]")
+    ax.legend(fontsize=8, loc="lower right")
+    return fig
+
+
+class _Bode:
+    """The attributes :func:`freqresp_report.bode_figure` reads, from a test's data."""
+
+    def __init__(self, data: Mapping[str, Any]) -> None:
+        self.points = data["points"]
+        self.amplitudes = data["amplitudes"]
+        self.f_hz = data["f_hz"]
+        self.linear = data["linear"]
+
+    def block(self, a: float) -> list[Any]:
+        return [p for p in self.points if p.amplitude_deg == a]
+
+
+def _freq(run: Any, test: Any, title: str) -> Figure:
+    from ema_cli.report.freqresp_report import bode_figure
+
+    fig = bode_figure(_Bode(run.data), f"{title}\n{run.name}: frequency response")
+    ax = fig.axes[0]
+    if "bandwidth" in test.limits:
+        _limit_line(ax, test.limits["bandwidth"], "Hz", horizontal=False)
+        ax.legend(title="amplitude", fontsize=8, loc="lower left")
+    return fig
+
+
+def _margins(run: Any, test: Any, title: str) -> Figure:
+    from ema_cli.report.margins_report import margins_figure
+
+    d = run.data
+    return margins_figure(d["f_hz"], d["loops"], d["margins"], f"{title}\n{run.name}: margins")
+
+
+def _threshold(run: Any, test: Any, title: str) -> Figure:
+    d = run.data
+    amps = np.array(sorted(d["tried"]))
+    frac = np.array([d["tried"][a] for a in amps])
+    ok = frac >= d["fraction"]
+    fig, ax = subplots(1, 1, figsize=(9, 5))
+    ax.semilogx(amps / DEG, 100 * frac, "-", color="0.6", lw=0.8)
+    ax.semilogx(amps[ok] / DEG, 100 * frac[ok], "o", color="C2", label="followed")
+    ax.semilogx(amps[~ok] / DEG, 100 * frac[~ok], "x", color="C3", label="not followed")
+    ax.axhline(100 * d["fraction"], color="0.3", ls="--", lw=1,
+               label=f"criterion {100 * d['fraction']:g} % within {test.within_s:g} s")
+    if math.isfinite(d["value"]):
+        ax.axvline(d["value"] / DEG, color="C0", lw=1.2,
+                   label=f"threshold {d['value'] / DEG:.4g} deg")
+    if "threshold" in test.limits:
+        _limit_line(ax, test.limits["threshold"], "deg", horizontal=False)
+    _lines(ax, f"{title}\n{run.name}: smallest step followed (search)",
+           "step size [deg]", "largest share of the step reached [%]")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+def _hysteresis(run: Any, test: Any, title: str) -> Figure:
+    d = run.data
+    up, down = d["rising"], d["falling"]
+    fig, axes = subplots(1, 2, figsize=(13, 5.5))
+    for mask, label, color in ((up, "rising command", "C0"), (down, "falling command", "C1")):
+        axes[0].plot(d["ref"][mask] / DEG, (d["load"][mask] - d["ref"][mask]) / DEG, ".",
+                     ms=1, color=color, label=label)
+        axes[1].plot(d["load"][mask] / DEG, (d["motor"][mask] - d["load"][mask]) / DEG, ".",
+                     ms=1, color=color, label=label)
+    hyst = run.values("hysteresis")[0].value / DEG
+    play = run.values("free_play")[0].value / DEG
+    _lines(axes[0], f"command -> load loop (width {hyst:.4g} deg)", "command [deg]",
+           "load angle - command [deg]")
+    _lines(axes[1], f"motor -> load lost motion (free play {play:.4g} deg)",
+           "load angle [deg]", "motor angle / m - load angle [deg]")
+    for ax in axes:
+        ax.legend(fontsize=8, loc="upper left", markerscale=8)
+    fig.suptitle(f"{title}\n{run.name}: slow triangle, last period")
+    fig.subplots_adjust(top=0.85, wspace=0.25)
+    return fig
+
+
+def _deflection(run: Any, test: Any, title: str) -> Figure:
+    d = run.data
+    fig, ax = subplots(1, 1, figsize=(9, 6))
+    ax.plot(d["torque"], d["load"] / DEG, "C0", lw=1.2, label="load angle (motor locked)")
+    T = np.linspace(-test.torque_nm, test.torque_nm, 3)
+    for b, side in ((d["b_pos"], T >= 0), (d["b_neg"], T <= 0)):
+        ax.plot(T[side], (d["slope"] * T[side] + b) / DEG, "k--", lw=1)
+    k = run.values("stiffness")[0].value
+    play = run.values("free_play")[0].value / DEG
+    _lines(ax, f"{title}\n{run.name}: load deflection, stiffness {k:.4g} N*m/rad, free play "
+               f"{play:.4g} deg (dashed: fitted lines)", "load torque [N*m]",
+           "load angle [deg]")
+    ax.legend(fontsize=8, loc="upper left")
+    return fig
+
+
+def _dynamic(run: Any, test: Any, title: str) -> Figure:
+    d = run.data
+    pts = d["points"]
+    f = d["f_hz"]
+    fig, ax = subplots(1, 1, figsize=(9, 5.5))
+    ax.loglog(f, [p.stiffness for p in pts], "o-", color="C0", ms=3, label="simulation")
+    ax.loglog(f, 1.0 / np.abs(d["linear"]), "k--", lw=1, label="linear model")
+    k = d["k_min"]
+    ax.loglog([pts[k].f_hz], [pts[k].stiffness], "s", color="C3", ms=8,
+              label=f"minimum {pts[k].stiffness:.4g} N*m/rad at {pts[k].f_hz:.4g} Hz")
+    if "dynamic_stiffness" in test.limits:
+        _limit_line(ax, test.limits["dynamic_stiffness"], "N*m/rad")
+    _lines(ax, f"{title}\n{run.name}: dynamic stiffness |T_load / theta_L|, closed loop",
+           "frequency [Hz]", "dynamic stiffness [N*m/rad]")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+def _rate(run: Any, test: Any, title: str) -> Figure:
+    d = run.data
+    fig, ax = subplots(1, 1, figsize=(9, 5))
+    ax.plot(d["t"], d["rate"] / DEG, "C0", lw=1.3, label="load rate")
+    if "rate" in test.limits:
+        _limit_line(ax, test.limits["rate"], "deg/s")
+    _lines(ax, f"{title}\n{run.name}: {d['amplitude_deg']:g} deg step, no load", "time [s]",
+           "load rate [deg/s]")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+FIGURES = {"step": _step, "frequency_response": _freq, "margins": _margins,
+           "threshold": _threshold, "hysteresis": _hysteresis, "load_deflection": _deflection,
+           "dynamic_stiffness": _dynamic, "no_load_rate": _rate}
+
+
+def test_figure(run: Any, test: Any, title: str) -> Figure:
+    """The figure of one test run."""
+    return FIGURES[run.kind](run, test, title)
+
+
+def fmt_value(v: float | None) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float) and math.isinf(v):
+        return "∞" if v > 0 else "-∞"
+    if isinstance(v, float) and math.isnan(v):
+        return "NaN"
+    return f"{v:.4g}"
+
+
+def fmt_limit(v: Any) -> str:
+    parts = []
+    if v.min is not None:
+        parts.append(f">= {fmt_value(v.min)}")
+    if v.max is not None:
+        parts.append(f"<= {fmt_value(v.max)}")
+    return " and ".join(parts)
+
+
+def acceptance_markdown(res: Any) -> str:
+    """acceptance.md: the verdict, the PASS/FAIL table, notes and figures."""
+    n_fail = len(res.failed)
+    verdict = ("**PASS**: every limit met" if res.passed
+               else f"**FAIL**: {n_fail} of {len(res.verdicts)} limits not met")
+    lines = [f"# {res.title}", "", res.spec.description.strip(), "",
+             f"Spec: `{res.source}`. {verdict} ({len(res.runs)} tests, "
+             f"{res.wall_time_s:.1f} s).", "",
+             "| test | metric | condition | value | limit | unit | result | note |",
+             "|---|---|---|---|---|---|---|---|"]
+    for v in res.verdicts:
+        lines.append(f"| {v.test} | {v.metric} | {v.condition} | {fmt_value(v.value)} | "
+                     f"{fmt_limit(v)} | {v.unit} | {'PASS' if v.passed else '**FAIL**'} | "
+                     f"{v.note} |")
+    notes = [(r.name, n) for r in res.runs for n in r.notes]
+    if notes:
+        lines += ["", "Notes:", ""] + [f"- {name}: {n}" for name, n in notes]
+    lines += ["", "## Figures", ""]
+    for r in res.runs:
+        lines += [f"### {r.name} ({r.kind}, {r.wall_s:.2f} s)", "", f"![{r.name}]({r.name}.png)",
+                  ""]
+    return "\n".join(lines)
+
+
+def write_acceptance(folder: Path, spec_yaml: str, res: Any,
+                     manifest_fields: Mapping[str, Any]) -> list[str]:
+    """Write the folder -> the names written."""
+    names = ["spec.resolved.yaml", "acceptance.csv"]
+    write_text(folder / "spec.resolved.yaml", spec_yaml)
+    write_csv(folder / "acceptance.csv", res.to_pandas(), float_format="%.9g")
+    for r in res.runs:
+        write_figure(folder / f"{r.name}.png", test_figure(r, res.spec.tests[r.name],
+                                                           res.title))
+        names.append(f"{r.name}.png")
+    write_text(folder / "acceptance.md", acceptance_markdown(res))
+    names += ["acceptance.md", "manifest.json"]
+    write_json(folder / "manifest.json", manifest("acceptance", outputs=names,
+                                                  **manifest_fields))
+    return names
