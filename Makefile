@@ -9,7 +9,7 @@ EMA     := $(BIN)/ema
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test bench lint reproduce reproduce-ci clean
+.PHONY: help run test bench lint reproduce reproduce-ci acceptance acceptance-ci clean
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-14s %s\n", $$1, $$2}'
@@ -36,6 +36,7 @@ test: $(TSTAMP)  ## lint, then the whole test suite
 bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
+	$(BIN)/python experiments/bench_acceptance.py
 
 lint: $(TSTAMP)  ## ruff
 	$(BIN)/ruff check ema_cli tests experiments
@@ -46,6 +47,13 @@ reproduce: $(STAMP)  ## reproduce the paper (Figs 2-10, identification, claims)
 reproduce-ci: $(STAMP)  ## the same batch as CI runs it (replaces results/reproduce-ci)
 	rm -rf results/reproduce-ci
 	$(EMA) reproduce experiments/paper2020.yaml --out results/reproduce-ci
+
+acceptance: $(STAMP)  ## the acceptance battery of the reference EMA (configs/acceptance.yaml)
+	$(EMA) acceptance configs/acceptance.yaml
+
+acceptance-ci: $(STAMP)  ## the same as CI runs it (replaces results/acceptance-ci)
+	rm -rf results/acceptance-ci
+	$(EMA) acceptance configs/acceptance.yaml --out results/acceptance-ci
 
 clean:  ## remove the virtual environment and caches (results/ is kept)
 	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -132,7 +132,7 @@ def sweep_cmd(
                        "are cached", 1)
 
 
-KINDS = ("auto", "study", "experiment", "identify")
+KINDS = ("auto", "study", "experiment", "identify", "acceptance")
 """What `ema validate` can check: a study config, an experiment batch, identification settings."""
 
 
@@ -141,6 +141,8 @@ def detect_kind(config: Path) -> str:
     from ema_cli.config.loader import read_yaml
 
     keys = set(read_yaml(config))
+    if keys & {"tests", "actuator"}:
+        return "acceptance"
     if keys & {"studies", "claims", "thresholds", "ranking", "identification", "paper"}:
         return "experiment"
     if keys & {"k_range", "alpha_range", "c_range", "ga", "synthetic", "method", "fit_c",
@@ -155,7 +157,8 @@ def validate_cmd(
     set_: SetOpt = None,
     kind: Annotated[str, typer.Option(
         "--kind", help="What CONFIG is: study (`ema sweep`/`simulate`), experiment "
-                       "(`ema reproduce`), identify (`ema identify`) or auto (from its keys).")
+                       "(`ema reproduce`), identify (`ema identify`), acceptance (`ema "
+                       "acceptance`) or auto (from its keys).")
     ] = "auto",
 ) -> None:
     """Check CONFIG against its schema (fast: nothing is simulated); for a study, count its
@@ -172,6 +175,15 @@ def validate_cmd(
         console.print(f"{config}: valid experiment; {len(exp.studies)} studies, "
                       f"{len(exp.thresholds)} thresholds, {len(exp.claims)} claims"
                       + (", an identification" if exp.identification else ""))
+        return
+    if kind == "acceptance":
+        from ema_cli.config.acceptance import AcceptanceSpec
+        from ema_cli.config.loader import load_config
+
+        spec = load_config(config, overrides, AcceptanceSpec)
+        n_limits = sum(len(t.limits) for t in spec.tests.values())
+        console.print(f"{config}: valid acceptance spec; {len(spec.tests)} tests, {n_limits} "
+                      "limits")
         return
     if kind == "identify":
         from ema_cli.config.loader import load_config

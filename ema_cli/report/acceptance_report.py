@@ -63,6 +63,7 @@ def _freq(run: Any, test: Any, title: str) -> Figure:
     from ema_cli.report.freqresp_report import bode_figure
 
     fig = bode_figure(_Bode(run.data), f"{title}\n{run.name}: frequency response")
+    fig.subplots_adjust(top=0.9)
     ax = fig.axes[0]
     if "bandwidth" in test.limits:
         _limit_line(ax, test.limits["bandwidth"], "Hz", horizontal=False)

@@ -75,3 +75,9 @@ def test_bad_specs_exit_2_with_one_line(tmp_path, text, message):
 def test_missing_spec_file(tmp_path):
     r = runner.invoke(app, ["acceptance", str(tmp_path / "none.yaml")])
     assert r.exit_code == 2 and "is not a file" in r.output
+
+
+def test_validate_recognises_a_spec():
+    r = runner.invoke(app, ["validate", SPEC])
+    assert r.exit_code == 0, r.output
+    assert "valid acceptance spec; 10 tests, 21 limits" in " ".join(r.output.split())

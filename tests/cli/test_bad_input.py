@@ -29,6 +29,7 @@ WRITERS = {
     "margins": ["margins"],
     "freqresp": ["freqresp", "--amplitudes", "1", "--f-min", "5", "--f-max", "10", "--n", "2"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
+    "acceptance": ["acceptance", str(ROOT / "configs" / "acceptance.yaml"), "--only", "margins"],
 }
 
 
@@ -74,7 +75,8 @@ def test_out_holding_other_files_is_never_overwritten(tmp_path, cmd):
     assert (tmp_path / "mine.csv").read_text() == "precious"
 
 
-@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins", "freqresp"])
+@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins", "freqresp",
+                                 "acceptance"])
 def test_a_finished_run_is_not_overwritten(tmp_path, cmd):
     out = tmp_path / "run"
     r = invoke(*WRITERS[cmd], "--out", str(out))

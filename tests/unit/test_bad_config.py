@@ -446,9 +446,11 @@ def test_experiment_file_checks_the_identification_settings(tmp_path):
 def test_bundled_experiment_and_configs_still_validate():
     root = Path(__file__).resolve().parents[2]
     load_experiment(root / "experiments" / "paper2020.yaml")
+    from ema_cli.config.acceptance import AcceptanceSpec
+
+    models = {"identify": IdentifySettings, "acceptance": AcceptanceSpec}
     for f in sorted((root / "configs").glob("*.yaml")):
-        model = IdentifySettings if f.stem == "identify" else StudyConfig
-        load_config(f, (), model)
+        load_config(f, (), models.get(f.stem, StudyConfig))
 
 
 # ------------------------------------------------------------------------------------------
