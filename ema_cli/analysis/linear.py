@@ -4,11 +4,13 @@ Linear limit (docs/model.md §2 with every nonlinearity removed): saturations SA
 dead zones, no backlash (``alpha`` ignored: permanent contact), no quantisers, a continuous
 controller, and LuGre friction linearised to its viscous part (``sigma2*w_m`` when friction is
 on). The constant load torque only moves the operating point and drops out; the hinge-moment
-gradient ``k_h`` stays.
+gradient ``k_h`` stays. Of the compensators, the viscous friction feed-forward and the notch are
+linear and stay; the dead-zone inverse goes with the dead zone it inverts, and the Coulomb part
+of the feed-forward with the friction it cancels.
 
-States ``x = [theta_m, w_m, i, theta_L, w_L, xI]`` (SI), inputs ``u = [theta_ref, T_d]`` (a
-torque disturbance on the load, + along +theta_L), outputs ``y = [theta_L, w_L, theta_m,
-w_m, i, u_dem]``:
+States ``x = [theta_m, w_m, i, theta_L, w_L, xI]`` (+ ``xn1, xn2`` with a notch) (SI), inputs
+``u = [theta_ref, T_d]`` (a torque disturbance on the load, + along +theta_L), outputs
+``y = [theta_L, w_L, theta_m, w_m, i, u_dem]``:
 
     dtheta_m = w_m
     Jm dw_m  = Kt i - (bm + f) w_m - T/m             f = sigma2 if friction on, else 0
@@ -17,7 +19,8 @@ w_m, i, u_dem]``:
     JL dw_L  = T - bL w_L - k_h theta_L + T_d
     dxI      = e_w
     T        = kL (theta_m/m - theta_L) + c (w_m/m - w_L)
-    u_dem    = Kps e_w + Kis xI,   e_w = m Kpp (theta_ref - theta_fb) - w_m
+    u_dem    = Kps e_w + Kis xI + k_ff w_m (+ notch),   e_w = w*_m - w_m,
+    w*_m     = m Kpp (theta_ref - theta_fb),   k_ff = R/Kt * ff_sigma2 (viscous compensation)
     theta_fb = (1 - b) theta_L + b theta_m / m     (b = fb_motor: 0 load sensor, 1 motor)
 
 Loops are broken at their feedback (the measured position theta_fb for the position loop, the
@@ -119,13 +122,24 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
     for name in ("m", "kL", "Jm", "JL", "L", "R"):
         if not (math.isfinite(q[name]) and q[name] > 0):
             raise EmaError(f"the linear model needs a finite {name} > 0, got {q[name]}")
-    A, b_u, b_d = _plant_rows(q)
+    A6, b_u6, b_d6 = _plant_rows(q)
     m, Kpp, Kps, Kis = q["m"], q["Kpp"], q["Kps"], q["Kis"]
-    # e_w = m Kpp (theta_ref - th_meas) - w_meas ; u = Kps e_w + Kis xI ; dxI = e_w
-    # as rows over [x, theta_ref, v]: e_w = ew_x @ x + ew_r * theta_ref + ew_v * v
-    ew_x = np.zeros(6)
+    f_n = float(params.get("notch_hz", 0.0))
+    n = 8 if f_n > 0 else 6  # the notch adds its two states
+    names = STATE_NAMES + (("xn1", "xn2") if n == 8 else ())
+    A = np.zeros((n, n))
+    A[:6, :6] = A6
+    b_u = np.zeros(n)
+    b_u[:6] = b_u6
+    b_d = np.zeros(n)
+    b_d[:6] = b_d6
+    # rows over [x, theta_ref, v]: e_w = ew_x @ x + ew_r * theta_ref + ew_v * v, with
+    # e_w = m Kpp (theta_ref - th_meas) - w_meas; ws: the measured motor speed w_meas
+    ew_x = np.zeros(n)
     ew_v = 0.0
     ew_r = m * Kpp
+    ws_x = np.zeros(n)
+    ws_v = 0.0
     b = float(params.get("fb_motor", 0.0))  # position fed back: (1-b)*theta_L + b*theta_m/m
     if broken == "position":
         ew_v = -m * Kpp
@@ -133,34 +147,53 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
         ew_x[3] = -m * Kpp * (1.0 - b)
         ew_x[0] = -Kpp * b
     if broken == "speed":
-        ew_v = -1.0
+        ew_v -= 1.0
+        ws_v = 1.0  # the measured motor speed is the injection
     else:
         ew_x[1] = -1.0
-    u_x = Kps * ew_x
-    u_x[5] += Kis
+        ws_x[1] = 1.0
+    # u_pre = Kps e_w + Kis xI + k_ff w_meas (the viscous friction compensation, R/Kt*ff_sigma2,
+    # on the measured motor speed);
+    # u = u_pre + c_n xn2 (the notch; xn1' = xn2, xn2' = -w^2 xn1 - 2 zeta w xn2 + u_pre)
+    k_ff = q["R"] / q["Kt"] * float(params.get("ff_sigma2", 0.0))
+    pre_x = Kps * ew_x + k_ff * ws_x
+    pre_x[5] += Kis
+    pre_r = Kps * ew_r
+    pre_v = Kps * ew_v + k_ff * ws_v
+    u_x = pre_x.copy()
+    if n == 8:
+        w_n = 2 * math.pi * f_n
+        zeta = float(params.get("notch_zeta", 0.5))
+        u_x[7] += 2.0 * (float(params.get("notch_depth", 0.1)) - 1.0) * zeta * w_n
     Acl = A + np.outer(b_u, u_x)
     Acl[5, :] += ew_x
-    col_r = b_u * (Kps * ew_r)
+    col_r = b_u * pre_r
     col_r[5] += ew_r
-    col_v = b_u * (Kps * ew_v)
+    col_v = b_u * pre_v
     col_v[5] += ew_v
-    C = np.zeros((6, 6))
-    for k, s in enumerate(("theta_L", "w_L", "theta_m", "w_m", "i")):
-        C[k, STATE_NAMES.index(s)] = 1.0
+    if n == 8:
+        Acl[6, 7] += 1.0
+        Acl[7, 6] -= w_n**2
+        Acl[7, 7] -= 2.0 * zeta * w_n
+        Acl[7, :] += pre_x
+        col_r[7] += pre_r
+        col_v[7] += pre_v
+    C = np.zeros((6, n))
+    for k, name in enumerate(("theta_L", "w_L", "theta_m", "w_m", "i")):
+        C[k, names.index(name)] = 1.0
     C[5] = u_x
     if broken is None:
         B = np.column_stack([col_r, b_d])
         D = np.zeros((6, 2))
-        D[5, 0] = Kps * ew_r
-        return StateSpace(Acl, B, C, D, STATE_NAMES, INPUT_NAMES, OUTPUT_NAMES)
-    Cr = np.zeros((1, 6))
+        D[5, 0] = pre_r
+        return StateSpace(Acl, B, C, D, names, INPUT_NAMES, OUTPUT_NAMES)
+    Cr = np.zeros((1, n))
     if broken == "position":
-        Cr[0, STATE_NAMES.index("theta_L")] = 1.0 - b
-        Cr[0, STATE_NAMES.index("theta_m")] = b / m
+        Cr[0, names.index("theta_L")] = 1.0 - b
+        Cr[0, names.index("theta_m")] = b / m
     else:
-        Cr[0, STATE_NAMES.index("w_m")] = 1.0
-    return StateSpace(Acl, col_v[:, None], Cr, np.zeros((1, 1)), STATE_NAMES, ("v",),
-                      ("return",))
+        Cr[0, names.index("w_m")] = 1.0
+    return StateSpace(Acl, col_v[:, None], Cr, np.zeros((1, 1)), names, ("v",), ("return",))
 
 
 @dataclass(frozen=True)

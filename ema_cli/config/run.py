@@ -155,6 +155,26 @@ class ControllerConfig(Strict):
                             "blend ((1-b)*load + b*motor, b = feedback_blend)")
     feedback_blend: FiniteFloat | None = Field(
         None, ge=0.0, le=1.0, description="b of position_feedback: blend, in [0, 1]")
+    deadzone_inverse_v: NonNegFloat | None = Field(
+        None, description="dead-zone inverse: the amplifier dead zone it assumes [V]")
+    deadzone_inverse_band_v: PositiveFloat | None = Field(
+        None, description="dead-zone inverse smoothing band [V] (default 0.02)")
+    friction_ff_fc_nm: NonNegFloat | None = Field(
+        None, description="friction feed-forward: assumed Coulomb friction [N*m]")
+    friction_ff_fs_nm: NonNegFloat | None = Field(
+        None, description="friction feed-forward: assumed static friction [N*m]")
+    friction_ff_vs_rad_s: PositiveFloat | None = Field(
+        None, description="friction feed-forward: assumed Stribeck velocity [rad/s]")
+    friction_ff_sigma2: NonNegFloat | None = Field(
+        None, description="friction feed-forward: assumed viscous coefficient [N*m*s/rad]")
+    friction_ff_band_rad_s: PositiveFloat | None = Field(
+        None, description="friction feed-forward: sign smoothing band [rad/s] (default 0.5)")
+    notch_hz: PositiveFloat | None = Field(
+        None, description="speed-loop notch centre frequency [Hz] (absent: no notch)")
+    notch_depth_db: FiniteFloat | None = Field(
+        None, le=0.0, description="notch gain at its centre [dB] <= 0 (default -20)")
+    notch_zeta: PositiveFloat | None = Field(
+        None, description="notch width: damping of its poles (default 0.5)")
 
     @model_validator(mode="after")
     def _blend(self) -> ControllerConfig:
@@ -164,6 +184,18 @@ class ControllerConfig(Strict):
             raise ValueError(f"feedback_blend is used only with position_feedback: blend, not "
                              f"{self.position_feedback}")
         return self
+
+    def compensator_params(self) -> dict[str, float]:
+        """The model parameters (SI) of the compensators set here."""
+        c = self
+        pairs = {"dzi_v": c.deadzone_inverse_v, "dzi_band": c.deadzone_inverse_band_v,
+                 "ff_fc": c.friction_ff_fc_nm, "ff_fs": c.friction_ff_fs_nm,
+                 "ff_vs": c.friction_ff_vs_rad_s, "ff_sigma2": c.friction_ff_sigma2,
+                 "ff_band": c.friction_ff_band_rad_s, "notch_hz": c.notch_hz,
+                 "notch_depth": (None if c.notch_depth_db is None
+                                 else 10.0 ** (c.notch_depth_db / 20.0)),
+                 "notch_zeta": c.notch_zeta}
+        return {k: float(v) for k, v in pairs.items() if v is not None}
 
     def blend(self) -> float | None:
         """The blend b the kernel sees (None: the default, load feedback)."""
@@ -182,6 +214,11 @@ class SensorsConfig(Strict):
 SECTION_PARAMS = {
     "load.torque_nm": "T_load", "load.spring_nm_per_rad": "k_h", "motor.locked": "locked",
     "controller.sample_time_s": "Ts", "controller.position_feedback": "fb_motor",
+    "controller.deadzone_inverse_v": "dzi_v", "controller.deadzone_inverse_band_v": "dzi_band",
+    "controller.friction_ff_fc_nm": "ff_fc", "controller.friction_ff_fs_nm": "ff_fs",
+    "controller.friction_ff_vs_rad_s": "ff_vs", "controller.friction_ff_sigma2": "ff_sigma2",
+    "controller.friction_ff_band_rad_s": "ff_band", "controller.notch_hz": "notch_hz",
+    "controller.notch_depth_db": "notch_depth", "controller.notch_zeta": "notch_zeta",
     "sensors.position_counts_per_rev": "q_pos",
     "sensors.speed_resolution_rpm": "q_speed",
 }
@@ -234,6 +271,7 @@ class RunConfig(Strict):
             out["Ts"] = self.controller.sample_time_s
         if self.controller.blend() is not None:
             out["fb_motor"] = self.controller.blend()
+        out.update(self.controller.compensator_params())
         if self.sensors.position_counts_per_rev is not None:
             out["q_pos"] = 2.0 * math.pi / self.sensors.position_counts_per_rev
         if self.sensors.speed_resolution_rpm is not None:
@@ -253,6 +291,13 @@ class RunConfig(Strict):
             parts.append("motor locked")
         if self.controller.sample_time_s is not None:
             parts.append(f"digital controller Ts {self.controller.sample_time_s * 1e3:g} ms")
+        comp = self.controller.compensator_params()
+        if comp.get("dzi_v"):
+            parts.append(f"dead-zone inverse {comp['dzi_v']:g} V")
+        if comp.get("ff_fc") or comp.get("ff_sigma2"):
+            parts.append("friction feed-forward")
+        if comp.get("notch_hz"):
+            parts.append(f"notch {comp['notch_hz']:g} Hz")
         if self.controller.position_feedback == "motor":
             parts.append("motor-angle position feedback")
         elif self.controller.position_feedback == "blend":

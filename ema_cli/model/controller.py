@@ -17,6 +17,8 @@ Euler, ``xI[k+1] = xI[k] + Ts*dxI/dt`` (:func:`integral_update_nb`).
 
 from __future__ import annotations
 
+import math
+
 from ema_cli._numba import njit
 from ema_cli.model.elements import dead_zone_nb, quantize_nb, saturate_nb
 
@@ -57,3 +59,52 @@ def integral_rate_nb(e_w, u_unsat, sat2):
 def integral_update_nb(x_i, e_w, u_unsat, sat2, ts):
     """Discrete PI integral ``xI[k+1] = xI[k] + Ts*dxI/dt`` (forward Euler, same anti-windup)."""
     return x_i + ts * integral_rate_nb(e_w, u_unsat, sat2)
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def smooth_sign_nb(x, band):
+    """``sign(x)`` ramped linearly over ``|x| < band`` (``band`` > 0)."""
+    return min(max(x / band, -1.0), 1.0)
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def deadzone_inverse_nb(u, d_est, band):
+    """Voltage sent to the amplifier [V]: the demand ``u`` plus the estimated dead zone
+    ``d_est`` [V] in its direction, ramped over ``|u| < band`` [V] against chattering (0: off).
+    With ``d_est`` equal to the true dead zone the amplifier outputs ``u`` for ``|u| >= band``."""
+    return u + d_est * smooth_sign_nb(u, band) if d_est > 0.0 else u
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def friction_ff_nb(w_cmd, w_meas, fc, fs, vs, delta, sig2, band):
+    """Friction compensation torque [N*m]: the estimated Coulomb-Stribeck part
+    ``(Fc + (Fs - Fc) exp(-|w/vs|^delta)) sign(w)`` at the motor speed command ``w_cmd``
+    [rad/s] (feed-forward: it cannot destabilise the loop), its sign ramped over
+    ``|w| < band`` [rad/s] (a Stribeck peak only when Fs > Fc), plus the estimated viscous part
+    ``sigma2 * w_meas`` on the measured motor speed [rad/s] (it cancels the viscous friction,
+    so the loop keeps the margins of the frictionless actuator)."""
+    g = fc
+    if fs > fc:
+        g += (fs - fc) * math.exp(-(abs(w_cmd / vs) ** delta))
+    return g * smooth_sign_nb(w_cmd, band) + sig2 * w_meas
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def notch_gain_nb(f_hz, depth, zeta):
+    """(w [rad/s], c) of the notch ``(s^2 + 2 depth zeta w s + w^2)/(s^2 + 2 zeta w s + w^2)``
+    written as ``y = u + c*x2`` with ``x1' = x2``, ``x2' = -w^2 x1 - 2 zeta w x2 + u``."""
+    w = 2.0 * math.pi * f_hz
+    return w, 2.0 * (depth - 1.0) * zeta * w
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def notch_update_nb(x1, x2, u, w, zeta, h):
+    """The notch states one step ``h`` [s] on, the input ``u`` held: trapezoidal (Tustin)."""
+    a = 0.5 * h
+    # (I - A a) x+ = (I + A a) x + B h u, A = [[0, 1], [-w^2, -2 zeta w]], B = [0, 1]
+    r1 = x1 + a * x2
+    r2 = x2 + a * (-w * w * x1 - 2.0 * zeta * w * x2) + h * u
+    m11, m12 = 1.0, -a
+    m21, m22 = a * w * w, 1.0 + 2.0 * a * zeta * w
+    det = m11 * m22 - m12 * m21
+    return (r1 * m22 - m12 * r2) / det, (m11 * r2 - m21 * r1) / det

@@ -60,6 +60,22 @@ PARAMS: tuple[Param, ...] = (
     Param("Kis", "V/rad", 1.5, "speed PI integral gain"),
     Param("fb_motor", "-", 0.0, "position feedback blend b: theta_meas = (1-b)*theta_L + "
           "b*theta_m/m (0: load sensor, 1: motor angle / m)"),
+    # compensators (config section `controller`; docs/model.md §2, controller)
+    Param("dzi_v", "V", 0.0, "dead-zone inverse: estimated amplifier dead zone added to the "
+          "voltage demand (0: off)"),
+    Param("dzi_band", "V", 0.02, "dead-zone inverse smoothing band: the added voltage ramps "
+          "linearly over |u| < band"),
+    Param("ff_fc", "N*m", 0.0, "friction feed-forward: estimated Coulomb friction (0: off)"),
+    Param("ff_fs", "N*m", 0.0, "friction feed-forward: estimated static friction (<= ff_fc: "
+          "no Stribeck peak)"),
+    Param("ff_vs", "rad/s", 1.0, "friction feed-forward: estimated Stribeck velocity"),
+    Param("ff_sigma2", "N*m*s/rad", 0.0, "friction feed-forward: estimated viscous "
+          "coefficient (0: off)"),
+    Param("ff_band", "rad/s", 0.5, "friction feed-forward: smoothing band of the Coulomb "
+          "sign, motor speed command"),
+    Param("notch_hz", "Hz", 0.0, "speed-loop notch filter centre frequency (0: off)"),
+    Param("notch_depth", "-", 0.1, "notch gain at its centre, zeta_z/zeta_p in [0, 1]"),
+    Param("notch_zeta", "-", 0.5, "notch width: damping of its poles zeta_p"),
     # saturations (inf = removed)
     Param("sat1", "rad/s", 800.0 * DEG, "position-regulator output limit (load speed)"),
     Param("sat2", "V", 40.0, "speed-regulator output limit (voltage demand)"),
@@ -161,6 +177,14 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
         values["sigma1"] = 2.0 * BRISTLE_DAMPING_RATIO * math.sqrt(values["sigma0"] * values["Jm"])  # type: ignore[operator]
     if values["c"] is None:
         values["c"] = 2.0 * values["zeta_t"] * math.sqrt(values["kL"] * equivalent_inertia(values))  # type: ignore[arg-type,operator]
+    if values["notch_depth"] > 1.0:  # type: ignore[operator]
+        raise EmaError(f"parameter 'notch_depth' (gain at the notch centre) must lie in [0, 1],"
+                       f" got {values['notch_depth']}")
+    for name in ("dzi_band", "ff_band", "ff_vs", "notch_zeta"):
+        if values["dzi_v" if name == "dzi_band" else "ff_fc" if name in ("ff_band", "ff_vs")
+                  else "notch_hz"] and not values[name] > 0:  # type: ignore[operator]
+            raise EmaError(f"parameter '{name}' must be > 0 when its compensator is on, got "
+                           f"{values[name]}")
     if values["fb_motor"] > 1.0:  # type: ignore[operator]
         raise EmaError(f"parameter 'fb_motor' (position feedback blend) must lie in [0, 1], "
                        f"got {values['fb_motor']}")
