@@ -36,6 +36,7 @@ test: $(TSTAMP)  ## lint, then the whole test suite
 bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
+	$(BIN)/python experiments/bench_identify_logs.py
 
 lint: $(TSTAMP)  ## ruff
 	$(BIN)/ruff check ema_cli tests experiments

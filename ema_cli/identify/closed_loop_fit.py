@@ -329,19 +329,22 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
 def quadratic_check(problem: ClosedLoopProblem, x: np.ndarray, r: np.ndarray, J: np.ndarray,
                     unc: Uncertainty) -> np.ndarray:
     """Whether the cost is locally quadratic at the scale of the uncertainty -> per parameter
-    the ratio of the actual mean rise of J at x +- 1 SE (others fixed) to the rise
-    ``SE^2 * |J_j|^2`` the Jacobian predicts (1 for a smooth cost; NaN where not checked).
-    All 2p points run in one kernel call."""
+    the ratio of the actual mean rise of J at x +- d (others fixed; d = 1 SE, at least the
+    finite-difference step) to the rise ``d^2 * |J_j|^2`` the Jacobian predicts (1 for a
+    smooth cost; NaN where not checked). All 2p points run in one kernel call."""
     p = x.shape[0]
     ok = np.isfinite(unc.se) & (unc.se > 0)
     ratio = np.full(p, np.nan)
     idx = np.flatnonzero(ok)
     if idx.size == 0:
         return ratio
+    # at least the finite-difference step: on noise-free data the SE is at rounding level
+    step = np.maximum(unc.se, FD_REL_STEP * np.maximum(
+        np.abs(x), 1e-3 * (problem.upper - problem.lower)))
     X = np.repeat(x[None], 2 * idx.size, axis=0)
     for k, j in enumerate(idx):
-        X[2 * k, j] = min(x[j] + unc.se[j], problem.upper[j])
-        X[2 * k + 1, j] = max(x[j] - unc.se[j], problem.lower[j])
+        X[2 * k, j] = min(x[j] + step[j], problem.upper[j])
+        X[2 * k + 1, j] = max(x[j] - step[j], problem.lower[j])
     R = problem.weighted_residuals(X)
     J0 = float(r @ r)
     Jx = np.sum(R**2, axis=1)

@@ -73,6 +73,7 @@ def test_noise_free_log_gives_the_truth(clean):
     fit = run_closed_loop(small_settings(clean.truth), as_log(clean))
     err = {n: fit.x[j] / clean.truth[n] - 1 for j, n in enumerate(fit.names)}
     assert max(abs(e) for e in err.values()) < 1e-4, err  # issue: 1e-4 relative
+    assert fit.to_json()["not_determined"] == []
 
 
 def test_one_percent_noise_within_tolerance_and_covered():
