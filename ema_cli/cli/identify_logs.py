@@ -117,8 +117,14 @@ def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | No
     console.print(f"{syn.log.description}")
     console.print("truth: " + ", ".join(f"{k} {v:.6g}" for k, v in syn.log.truth.items()))
     flag = "--closed-loop" if syn.log.kind == "closed-loop" else "--friction-sweep"
+    keep = ""
+    if syn.log.kind == "closed-loop":  # what the fit must hold fixed as the data had it
+        from ema_cli.identify.closed_loop import DEFAULT_FREE
+
+        keep = "".join(f" --set plant.{k}={v}" for k, v in syn.settings.plant.items()
+                       if k not in DEFAULT_FREE)
     console.print(f"-> {folder / (stem + '.csv')} (truths in {stem}.truth.json); fit it with "
-                  f"`ema identify {flag} --data {folder / (stem + '.csv')}`")
+                  f"`ema identify {flag} --data {folder / (stem + '.csv')}{keep}`")
 
 
 def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:

@@ -206,8 +206,9 @@ def friction_figure(fit: FrictionFit) -> Figure:
     rpm = d.omega / RPM
     a0.plot(rpm, d.torque, "o", color="0.5", ms=4, label="measured")
     lim = float(np.max(np.abs(d.omega)))
-    w = np.concatenate([-np.geomspace(lim, lim * 1e-4, 400), np.geomspace(lim * 1e-4, lim, 400)])
-    a0.plot(w / RPM, fit.model(w), "C0", lw=1.2, label="fitted static LuGre curve")
+    w = np.geomspace(lim * 1e-4, lim, 400)
+    for sign, label in ((1.0, "fitted static LuGre curve"), (-1.0, None)):
+        a0.plot(sign * w / RPM, fit.model(sign * w), "C0", lw=1.2, label=label)
     a0.set_xscale("symlog", linthresh=float(np.min(np.abs(rpm))))
     a0.set_xlabel("motor speed [rpm]")
     a0.set_ylabel("friction torque [N·m]")
