@@ -32,6 +32,25 @@ def _free_pairs(free: list[str] | None) -> list[tuple[str, Any]]:
     return pairs
 
 
+def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
+                      free: list[str] | None) -> list[tuple[str, Any]]:
+    """``pairs`` + the ``--free`` options. ``--free`` adds to the free set: to the config's
+    ``free:`` when it has one, else to the default set (kL, alpha, Fc, sigma2)."""
+    extra = _free_pairs(free)
+    if not extra:
+        return pairs
+    has_free = any(k == "free" for k, _ in pairs)
+    if config is not None and not has_free:
+        from ema_cli.config.loader import read_yaml
+
+        has_free = "free" in read_yaml(config)
+    if not has_free:
+        from ema_cli.identify.closed_loop import DEFAULT_FREE
+
+        pairs = [("free", {k: list(v) for k, v in DEFAULT_FREE.items()}), *pairs]
+    return [*pairs, *extra]
+
+
 def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> Any:
     from rich.table import Table
 
@@ -102,7 +121,7 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
             pairs.append(("ga.pop", pop))
         if generations is not None:
             pairs.append(("ga.generations", generations))
-        pairs += _free_pairs(free)
+        pairs = closed_loop_pairs(config, pairs, free)
         _closed_loop(config, pairs, out)
     else:
         _friction_sweep(config, pairs, out)

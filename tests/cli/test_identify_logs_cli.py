@@ -130,3 +130,20 @@ def test_bad_log_names_the_row_and_writes_nothing(logs, tmp_path):
                      "--set", "channels.torque_nm=auto", "--out", out)
     assert r.exit_code == 2 and "channels.torque_nm: unknown channel" in text, text
     assert not out.exists()
+
+
+def test_free_adds_to_the_default_set_or_the_configs(tmp_path):
+    from ema_cli.cli.identify_logs import closed_loop_pairs
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.log_settings import ClosedLoopSettings
+
+    pairs = closed_loop_pairs(None, [], ["Fs=0,0.2", "kL=400,800"])
+    s = load_config(None, pairs, ClosedLoopSettings)
+    assert s.free == {"kL": (400.0, 800.0), "alpha": (0.0, 0.01), "Fc": (0.0, 0.1),
+                      "sigma2": (0.0, 0.1), "Fs": (0.0, 0.2)}
+    cfg = tmp_path / "cl.yaml"
+    cfg.write_text("free: {kL: [500, 700]}\n")
+    s = load_config(cfg, closed_loop_pairs(cfg, [], ["vs=0.1,10"]), ClosedLoopSettings)
+    assert s.free == {"kL": (500.0, 700.0), "vs": (0.1, 10.0)}
+    assert load_config(None, closed_loop_pairs(None, [], None), ClosedLoopSettings).free == {
+        "kL": (300.0, 900.0), "alpha": (0.0, 0.01), "Fc": (0.0, 0.1), "sigma2": (0.0, 0.1)}
