@@ -37,6 +37,7 @@ bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
+	$(BIN)/python experiments/bench_identify_logs.py
 
 lint: $(TSTAMP)  ## ruff
 	$(BIN)/ruff check ema_cli tests experiments

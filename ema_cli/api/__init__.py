@@ -20,12 +20,22 @@ from __future__ import annotations
 from ema_cli.api.acceptance import AcceptanceResult, acceptance
 from ema_cli.api.freqresp import FrequencyResponse, freqresp
 from ema_cli.api.identification import Identification, identify
+from ema_cli.api.identify_logs import (
+    ClosedLoopIdentification,
+    FrictionSweepIdentification,
+    SyntheticData,
+    identify_closed_loop,
+    identify_friction_sweep,
+    make_identification_data,
+)
 from ema_cli.api.margins import LoopMargins, margins
 from ema_cli.api.simulation import Simulation, simulate
 from ema_cli.api.study import Sweep, sweep
 from ema_cli.api.threshold import Threshold, threshold
 from ema_cli.errors import EmaError
 
-__all__ = ["AcceptanceResult", "EmaError", "FrequencyResponse", "Identification",
-           "LoopMargins", "Simulation", "Sweep", "Threshold", "acceptance", "freqresp",
-           "identify", "margins", "simulate", "sweep", "threshold"]
+__all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
+           "FrictionSweepIdentification", "Identification", "LoopMargins", "Simulation",
+           "Sweep", "SyntheticData", "Threshold", "acceptance", "freqresp", "identify",
+           "identify_closed_loop", "identify_friction_sweep", "make_identification_data",
+           "margins", "simulate", "sweep", "threshold"]

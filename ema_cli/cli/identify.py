@@ -111,11 +111,42 @@ def identify_cmd(
         "--set", help="Override a setting by dotted path, e.g. ga.pop=50, synthetic.noise_pct=1; "
                       "repeatable (the options above win).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
+    closed_loop: Annotated[bool, typer.Option(
+        "--closed-loop", help="Fit the whole simulator to a closed-loop log (--data LOG.csv: "
+                              "t_s, theta_ref_deg, theta_load_deg [, omega_motor_rpm, current_a, "
+                              "voltage_cmd_v]); output error, GA then least squares.")] = False,
+    friction_sweep: Annotated[bool, typer.Option(
+        "--friction-sweep", help="Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a "
+                                 "constant-speed sweep (--data SWEEP.csv: omega_rpm, torque_nm)."
+    )] = False,
+    make_data: Annotated[str | None, typer.Option(
+        "--make-data", help="Write synthetic data with stated truths: closed-loop (a 4 s chirp "
+                            "log) or friction-sweep; with --noise, --seed, --set plant.NAME=VALUE."
+    )] = None,
+    free: Annotated[list[str] | None, typer.Option(
+        "--free", help="--closed-loop: free a parameter with bounds, NAME=LO,HI in SI (e.g. "
+                       "Fs=0,0.2); repeatable; added to the default set kL, alpha, Fc, sigma2 "
+                       "(a config's free: replaces it).")] = None,
 ) -> None:
     """Identify kL and alpha (and c) from transmission torque data by minimising the paper's
     Eq. 8, J = sum (T_meas - T_model)^2, with a GA, beside the exact least-squares optimum.
     Writes identification.json, runs.csv, history.csv, convergence.png, fit.png and
-    manifest.json."""
+    manifest.json. With --closed-loop, --friction-sweep or --make-data: the log
+    identifications (docs/identification.md)."""
+    modes = [m for m, on in (("--closed-loop", closed_loop), ("--friction-sweep", friction_sweep),
+                             ("--make-data", make_data is not None)) if on]
+    if modes or free:
+        from ema_cli.cli.identify_logs import run_log_mode
+
+        torque_only = {"--k-range": k_range, "--alpha-range": alpha_range, "--c-range": c_range,
+                       "--method": method, "--runs": runs, "--n-jobs": n_jobs,
+                       "--columns": columns, "--damping": damping, "--model": model, "--c": c,
+                       "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits}
+        run_log_mode(modes, config=config, data=data, noise=noise, seed=seed, pop=pop,
+                     generations=generations, set_=set_, out=out, free=free,
+                     make_data=make_data,
+                     torque_only=[k for k, v in torque_only.items() if v is not None])
+        return
     from ema_cli.api.identification import identify
     from ema_cli.config.loader import load_config
     from ema_cli.identify.problem import PARAM_UNITS

@@ -1,0 +1,150 @@
+"""``api.identify_closed_loop``, ``api.identify_friction_sweep``, ``api.make_identification_data``:
+the log identifications as ``ema identify --closed-loop / --friction-sweep / --make-data`` run
+them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ema_cli.api._inputs import ConfigSource, Overrides, folder_arg, override_pairs
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ema_cli.identify.closed_loop_fit import ClosedLoopFit
+    from ema_cli.identify.friction_sweep import FrictionFit
+    from ema_cli.identify.synthetic_logs import SyntheticLog
+
+
+def _save(command: str, name: str, settings: dict[str, Any], folder: str | Path | None,
+          write: Any) -> Path:
+    from ema_cli.hashing import content_hash
+    from ema_cli.report.rundir import finish_output, prepare_output
+
+    out, _ = prepare_output(command, name, content_hash(settings, 16), folder_arg(folder))
+    write(out)
+    finish_output(out)
+    return out
+
+
+@dataclass
+class ClosedLoopIdentification:
+    """A closed-loop identification: ``result`` is ``identify.closed_loop_fit.ClosedLoopFit``."""
+
+    result: ClosedLoopFit
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """The identified free parameters, SI (names of ``ema params``)."""
+        return {n: float(v) for n, v in zip(self.result.names, self.result.x, strict=True)}
+
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """One row per free parameter: value, unit, SE, 95 % interval, determined."""
+        import pandas as pd
+
+        rows = []
+        for n, v in self.result.to_json()["parameters"].items():
+            rows.append({"parameter": n, "value": v["value"], "unit": v["unit"],
+                         "standard_error": v["standard_error"], "ci95_low": v["ci95"][0],
+                         "ci95_high": v["ci95"][1], "determined": v["determined"]})
+        return pd.DataFrame(rows)
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write the folder ``ema identify --closed-loop`` writes -> the folder."""
+        from ema_cli.report.log_identify_report import write_closed_loop
+
+        s = self.result.settings
+        return _save("identify", s.name, s.model_dump(mode="json"), folder,
+                     lambda out: write_closed_loop(self.result, out))
+
+
+@dataclass
+class FrictionSweepIdentification:
+    """A friction-sweep identification: ``result`` is ``identify.friction_sweep.FrictionFit``."""
+
+    result: FrictionFit
+    settings: Any
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Fc [N*m], Fs [N*m], vs [rad/s], sigma2 [N*m*s/rad]."""
+        return self.result.params
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write the folder ``ema identify --friction-sweep`` writes -> the folder."""
+        from ema_cli.report.log_identify_report import write_friction_sweep
+
+        js = self.settings.model_dump(mode="json")
+        return _save("identify", self.settings.name, js, folder,
+                     lambda out: write_friction_sweep(self.result, out, js))
+
+
+@dataclass
+class SyntheticData:
+    """Synthetic identification data: ``log`` is ``identify.synthetic_logs.SyntheticLog``."""
+
+    log: SyntheticLog
+    settings: Any
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write ``<kind>.csv``, ``<kind>.truth.json`` and the manifest -> the folder."""
+        from ema_cli.report.log_identify_report import write_synthetic
+
+        js = self.settings.model_dump(mode="json")
+        return _save("identify", f"data-{self.log.kind}", js, folder,
+                     lambda out: write_synthetic(self.log, out, js))
+
+
+def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = None,
+                         **settings: Any) -> ClosedLoopIdentification:
+    """Fit the simulator to a closed-loop log (``data=`` the CSV), as ``ema identify
+    --closed-loop`` does; settings: ``identify.log_settings.ClosedLoopSettings``."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.closed_loop_fit import run_closed_loop
+    from ema_cli.identify.log_settings import ClosedLoopSettings
+
+    pairs = override_pairs(overrides) + list(settings.items())
+    cfg = load_config(config, pairs, ClosedLoopSettings)
+    return ClosedLoopIdentification(run_closed_loop(cfg))
+
+
+def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = None,
+                            **settings: Any) -> FrictionSweepIdentification:
+    """Fit the static LuGre curve to a friction sweep (``data=`` the CSV), as ``ema identify
+    --friction-sweep`` does; settings: ``identify.log_settings.FrictionSweepSettings``."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.errors import EmaError
+    from ema_cli.identify.friction_sweep import fit_friction_sweep, load_sweep
+    from ema_cli.identify.log_settings import FrictionSweepSettings
+
+    pairs = override_pairs(overrides) + list(settings.items())
+    cfg = load_config(config, pairs, FrictionSweepSettings)
+    if cfg.data is None:
+        raise EmaError("--friction-sweep needs --data SWEEP.csv (columns omega_rpm, torque_nm)")
+    fit = fit_friction_sweep(load_sweep(cfg.data), cfg.delta, cfg.vs_range)
+    return FrictionSweepIdentification(fit, cfg)
+
+
+def make_identification_data(config: ConfigSource = None, overrides: Overrides = None,
+                             **settings: Any) -> SyntheticData:
+    """Synthetic data with stated truths, as ``ema identify --make-data KIND`` makes them;
+    settings: ``identify.log_settings.MakeDataSettings`` (``kind``, ``noise_pct``, ``seed``,
+    ``plant``, ...)."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.log_settings import MakeDataSettings
+    from ema_cli.identify.synthetic_logs import closed_loop_log, friction_sweep_log
+
+    pairs = override_pairs(overrides) + list(settings.items())
+    cfg = load_config(config, pairs, MakeDataSettings)
+    if cfg.kind == "closed-loop":
+        log = closed_loop_log(cfg.plant, cfg.noise_pct, cfg.seed, amplitude_deg=cfg.amplitude_deg,
+                              freq_hz=cfg.freq_hz, freq_end_hz=cfg.freq_end_hz,
+                              duration_s=cfg.duration_s,
+                              sample_interval_s=cfg.sample_interval_s, dt_s=cfg.dt_s)
+    else:
+        log = friction_sweep_log(cfg.plant, cfg.noise_pct, cfg.seed,
+                                 speeds_rpm=cfg.speeds_rpm)
+    return SyntheticData(log, cfg)

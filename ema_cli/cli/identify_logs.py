@@ -1,0 +1,181 @@
+"""The log modes of `ema identify`: --closed-loop, --friction-sweep, --make-data (called by
+``cli.identify.identify_cmd``; heavy imports inside the functions)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from ema_cli.cli.common import check_number, console, err_console, parse_assignments
+from ema_cli.errors import EmaError
+
+MAKE_KINDS = ("closed-loop", "friction-sweep")
+
+
+def _free_pairs(free: list[str] | None) -> list[tuple[str, Any]]:
+    """``--free NAME=LO,HI`` -> (``free.NAME``, [LO, HI]) overrides; errors name the option."""
+    import math
+
+    pairs = []
+    for name, text in parse_assignments(free, "--free"):
+        parts = [x.strip() for x in text.split(",")]
+        try:
+            lo, hi = (float(parts[0]), float(parts[1]))
+            if len(parts) != 2:
+                raise ValueError
+        except (ValueError, IndexError):
+            raise EmaError(f"--free {name}: expected NAME=LO,HI (two numbers in SI), got "
+                           f"{text!r}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            raise EmaError(f"--free {name}: bounds must be finite, got {text}")
+        pairs.append((f"free.{name}", [lo, hi]))
+    return pairs
+
+
+def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
+                      free: list[str] | None) -> list[tuple[str, Any]]:
+    """``pairs`` + the ``--free`` options. ``--free`` adds to the free set: to the config's
+    ``free:`` when it has one, else to the default set (kL, alpha, Fc, sigma2)."""
+    extra = _free_pairs(free)
+    if not extra:
+        return pairs
+    has_free = any(k == "free" for k, _ in pairs)
+    if config is not None and not has_free:
+        from ema_cli.config.loader import read_yaml
+
+        has_free = "free" in read_yaml(config)
+    if not has_free:
+        from ema_cli.identify.closed_loop import DEFAULT_FREE
+
+        pairs = [("free", {k: list(v) for k, v in DEFAULT_FREE.items()}), *pairs]
+    return [*pairs, *extra]
+
+
+def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> Any:
+    from rich.table import Table
+
+    table = Table(title=title, header_style="bold")
+    cols = ["param", "value", "unit", "SE", "95 % interval", "determined"]
+    if truth:
+        cols += ["truth", "error %"]
+    for col in cols:
+        table.add_column(col, justify="left" if col in ("param", "unit", "determined")
+                         else "right")
+    for n, v in params.items():
+        row = [n, f"{v['value']:.6g}", v["unit"], f"{v['standard_error']:.3g}",
+               f"[{v['ci95'][0]:.6g}, {v['ci95'][1]:.6g}]",
+               "yes" if v["determined"] else "NOT DETERMINED"]
+        if truth:
+            t = truth.get(n)
+            row += ["—" if t is None else f"{t:.6g}",
+                    "—" if not t else f"{100 * (v['value'] / t - 1):+.3g}"]
+        table.add_row(*row)
+    return table
+
+
+def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
+                 noise: float | None, seed: int | None, pop: int | None,
+                 generations: int | None, set_: list[str] | None, out: Path | None,
+                 free: list[str] | None, make_data: str | None,
+                 torque_only: list[str]) -> None:
+    """Check the options of a log mode (one mode; no torque-data options) and run it."""
+    from ema_cli.report.rundir import check_output
+
+    if len(modes) > 1:
+        raise EmaError(f"{' and '.join(modes)} cannot be combined; choose one mode")
+    if not modes:
+        raise EmaError("--free applies to --closed-loop only")
+    mode = modes[0]
+    if torque_only:
+        raise EmaError(f"{', '.join(torque_only)} appl{'ies' if len(torque_only) == 1 else 'y'}"
+                       f" to the torque-data identification, not to {mode}")
+    if free and mode != "--closed-loop":
+        raise EmaError(f"--free applies to --closed-loop, not to {mode}")
+    if mode != "--make-data" and noise is not None:
+        raise EmaError(f"--noise describes synthetic data (--make-data), not {mode}")
+    if mode != "--closed-loop" and (pop is not None or generations is not None):
+        raise EmaError(f"--pop and --generations set the GA of --closed-loop, not {mode}")
+    check_number(noise, "--noise", low=0.0)
+    check_output(out, "identify")
+    pairs: list[tuple[str, Any]] = list(parse_assignments(set_, "--set"))
+    if mode == "--make-data":
+        if data is not None:
+            raise EmaError("--make-data writes data; it takes no --data")
+        if make_data not in MAKE_KINDS:
+            raise EmaError(f"--make-data: expected {' or '.join(MAKE_KINDS)}, got {make_data!r}")
+        pairs += [("kind", make_data)]
+        if noise is not None:
+            pairs.append(("noise_pct", noise))
+        if seed is not None:
+            pairs.append(("seed", seed))
+        _make_data(config, pairs, out)
+        return
+    if data is not None:
+        pairs.append(("data", str(data)))
+    if seed is not None and mode == "--closed-loop":
+        pairs.append(("seed", seed))
+    elif seed is not None:
+        raise EmaError("--seed has no use with --friction-sweep (the fit is deterministic)")
+    if mode == "--closed-loop":
+        if pop is not None:
+            pairs.append(("ga.pop", pop))
+        if generations is not None:
+            pairs.append(("ga.generations", generations))
+        pairs = closed_loop_pairs(config, pairs, free)
+        _closed_loop(config, pairs, out)
+    else:
+        _friction_sweep(config, pairs, out)
+
+
+def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:
+    from ema_cli.api.identify_logs import make_identification_data
+
+    syn = make_identification_data(config, pairs)
+    folder = syn.save(out)
+    stem = syn.log.kind.replace("-", "_")
+    console.print(f"{syn.log.description}")
+    console.print("truth: " + ", ".join(f"{k} {v:.6g}" for k, v in syn.log.truth.items()))
+    flag = "--closed-loop" if syn.log.kind == "closed-loop" else "--friction-sweep"
+    keep = ""
+    if syn.log.kind == "closed-loop":  # what the fit must hold fixed as the data had it
+        from ema_cli.identify.closed_loop import DEFAULT_FREE
+
+        keep = "".join(f" --set plant.{k}={v}" for k, v in syn.settings.plant.items()
+                       if k not in DEFAULT_FREE)
+    console.print(f"-> {folder / (stem + '.csv')} (truths in {stem}.truth.json); fit it with "
+                  f"`ema identify {flag} --data {folder / (stem + '.csv')}{keep}`")
+
+
+def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:
+    from ema_cli.api.identify_logs import identify_closed_loop
+
+    ident = identify_closed_loop(config, pairs)
+    fit = ident.result
+    folder = ident.save(out)
+    js = fit.to_json()
+    console.print(_table(f"ema identify --closed-loop · {fit.problem.log.source}",
+                         js["parameters"], fit.problem.log.truth))
+    console.print("fit RMS: " + ", ".join(f"{c} {v:.4g}" for c, v in js["fit_rms"].items())
+                  + f"; J = {fit.cost:.6g}")
+    for w in fit.warnings:
+        err_console.print(f"[yellow]warning:[/] {w}")
+    t = fit.timings
+    console.print(f"GA {t['ga_s']:.1f} s ({fit.ga_throughput / 1e6:.1f} M steps/s), polish "
+                  f"{t['polish_s']:.1f} s, uncertainty and profile "
+                  f"{t['uncertainty_profile_s']:.1f} s; total {t['total_s']:.1f} s -> {folder}")
+
+
+def _friction_sweep(config: Path | None, pairs: list[tuple[str, Any]],
+                    out: Path | None) -> None:
+    from ema_cli.api.identify_logs import identify_friction_sweep
+
+    ident = identify_friction_sweep(config, pairs)
+    fit = ident.result
+    folder = ident.save(out)
+    js = fit.to_json()
+    console.print(_table(f"ema identify --friction-sweep · {fit.data.source}",
+                         js["parameters"], fit.data.truth))
+    for w in fit.warnings:
+        err_console.print(f"[yellow]warning:[/] {w}")
+    console.print(f"residual std {js['cost']['residual_std_nm']:.4g} N·m; sigma0 is not "
+                  f"identifiable at constant speed; {fit.wall_time_s:.2f} s -> {folder}")

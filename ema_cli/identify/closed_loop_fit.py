@@ -1,0 +1,357 @@
+"""The closed-loop fit: GA (one batched kernel call per generation) -> least-squares polish
+(batched finite-difference Jacobian) -> uncertainty -> cost profile along alpha.
+
+1. GA (``identify.ga``, improved mode) over the bounds at the coarse step ``ga_dt``.
+2. ``scipy.optimize.least_squares`` (bounded TRF) on the weighted residuals at the fine step
+   ``dt``, in variables scaled to the bounds (u = (x - lo)/(hi - lo)); its Jacobian is a
+   central finite difference whose 2p perturbed parameter sets run in ONE kernel call.
+3. Uncertainty (``identify.uncertainty``): standard errors from the Jacobian at the optimum
+   (sandwich with one noise level per channel), Student-t 95 % intervals, correlations and the
+   "not determined" flags.
+4. Alpha (when free): the cost along alpha with the other parameters at the optimum (a slice),
+   and the profile linearised in the others (each slice point's residuals re-fitted over the
+   other parameters with the Jacobian at the optimum), all alpha values in one kernel call. If
+   the slice finds a clearly lower cost than the polish, the polish is restarted there (the
+   cost is not smooth in alpha: backlash switches contact on and off).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ema_cli.errors import EmaError
+from ema_cli.identify.closed_loop import (
+    CHANNELS,
+    ClosedLoopLog,
+    ClosedLoopProblem,
+    channel_scale,
+    check_free,
+    load_log,
+)
+from ema_cli.identify.ga import GAHistory, preset, run_ga
+from ema_cli.identify.log_settings import ClosedLoopSettings
+from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
+from ema_cli.model.params import BY_NAME
+
+FD_REL_STEP = 1e-4  # central-difference step, relative to max(|x|, 1e-3*(hi - lo)) [-]
+POLISH_TOL = 1e-10  # xtol/ftol/gtol of the least-squares polish [-]
+RESTART_MARGIN = 1e-3  # restart the polish when the slice is 0.1 % lower than its optimum [-]
+QUADRATIC_RATIO = 3.0  # the cost 1 SE away must rise 1/3 .. 3 x what J^T J predicts [-]
+
+
+@dataclass
+class ClosedLoopFit:
+    """A closed-loop identification (SI): estimate, uncertainty, data and diagnostics."""
+
+    settings: ClosedLoopSettings
+    problem: ClosedLoopProblem
+    x_ga: np.ndarray
+    cost_ga: float
+    x: np.ndarray
+    cost: float
+    residuals: np.ndarray  # weighted residuals at x [n_ch*n]
+    jacobian: np.ndarray  # d residuals / d x at x [n_ch*n, p]
+    uncertainty: Uncertainty
+    prediction: np.ndarray  # simulated channels at x [n_ch, n] (SI)
+    history: GAHistory | None
+    scale_notes: dict[str, str]
+    alpha_grid: np.ndarray | None = None
+    alpha_slice: np.ndarray | None = None
+    alpha_profile: np.ndarray | None = None
+    polish_nfev: int = 0
+    polish_njev: int = 0
+    polish_status: str = ""
+    restarted: bool = False
+    timings: dict[str, float] = field(default_factory=dict)
+    ga_throughput: float = 0.0  # kernel steps per second inside the GA [steps/s]
+    warnings: list[str] = field(default_factory=list)
+    quadratic_ratio: np.ndarray | None = None  # see quadratic_check
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.problem.names
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Complete SI parameters at the estimate (fixed, free and derived)."""
+        return self.problem.params(self.x)
+
+    def fit_rms(self) -> dict[str, float]:
+        """RMS of measured - simulated per channel, in the channel's edge unit."""
+        out = {}
+        for j, c in enumerate(self.problem.channels):
+            r = (self.problem.measured[j] - self.prediction[j]) / CHANNELS[c][1]
+            out[c] = float(np.sqrt(np.mean(r**2)))
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """The content of identification.json."""
+        p = self.problem
+        u = self.uncertainty
+        units = {n: BY_NAME[n].unit for n in self.names}
+        truth = p.log.truth
+        full = self.params
+        out: dict[str, Any] = {
+            "mode": "closed-loop",
+            "method": "output error: GA (identify.ga improved, one batched kernel call per "
+                      "generation) at ga_dt, then scipy least_squares (TRF, bounds) at dt "
+                      "with a batched central-difference Jacobian",
+            "data": {"source": p.log.source, "n_samples": p.log.n,
+                     "duration_s": p.log.duration, "t0_s": p.log.t0,
+                     "channels": list(p.channels)},
+            "free": {n: [float(p.lower[j]), float(p.upper[j])] for j, n in enumerate(self.names)},
+            "fixed": p.fixed,
+            "weights": {c: {"scale": float(p.scales[j] / CHANNELS[c][1]),
+                            "unit": CHANNELS[c][2], "chosen_by": self.scale_notes[c]}
+                        for j, c in enumerate(p.channels)},
+            "dt_s": p.dt, "ga_dt_s": p.ga_dt,
+            "parameters": u.to_json(units),
+            "not_determined": [n for n, d in zip(self.names, u.determined, strict=True)
+                               if not d],
+            "correlation": {"names": list(self.names), "matrix": u.corr.tolist()},
+            "covariance_si": u.cov.tolist(),
+            "intervals": f"95 % (Student's t, {u.dof} dof: t = {u.t_quantile:.4f}); covariance "
+                         "A^-1 B A^-1 from the Jacobian, one noise level per channel",
+            "condition_number": u.cond,
+            "quadratic_check": None if self.quadratic_ratio is None else {
+                n: (float(v) if np.isfinite(v) else None)
+                for n, v in zip(self.names, self.quadratic_ratio, strict=True)},
+            "cost": {"J": self.cost, "J_ga": self.cost_ga, "definition":
+                     "sum over channels and samples of ((measured - simulated)/scale)^2"},
+            "fit_rms": self.fit_rms(),
+            "all_parameters": full,
+            "ga": {"pop": self.settings.ga.pop, "generations": self.settings.ga.generations,
+                   "evaluations": None if self.history is None
+                   else int(self.history.evaluations[-1]),
+                   "x": {n: float(self.x_ga[j]) for j, n in enumerate(self.names)},
+                   "kernel_steps_per_s": self.ga_throughput},
+            "polish": {"function_evaluations": self.polish_nfev,
+                       "jacobian_evaluations": self.polish_njev, "status": self.polish_status,
+                       "restarted_from_profile": self.restarted},
+            "timings_s": self.timings,
+            "warnings": self.warnings,
+        }
+        if truth is not None:
+            out["truth"] = {n: truth[n] for n in self.names if n in truth}
+            out["error_pct_vs_truth"] = {
+                n: 100.0 * (float(self.x[j]) / truth[n] - 1.0)
+                for j, n in enumerate(self.names) if truth.get(n)}
+            out["truth_in_ci95"] = {
+                n: bool(u.ci_low[j] <= truth[n] <= u.ci_high[j])
+                for j, n in enumerate(self.names) if n in truth}
+        return out
+
+
+def build_problem(settings: ClosedLoopSettings, log: ClosedLoopLog) -> tuple[
+        ClosedLoopProblem, dict[str, str]]:
+    """The problem of ``log`` with the settings' free set, fixed plant, channels and scales."""
+    names, lo, hi = check_free(settings.free, settings.plant)
+    chosen = settings.channels or {c: "auto" for c in log.channels}
+    notes = {}
+    scales = []
+    for c, s in chosen.items():
+        if c not in log.channels:
+            raise EmaError(f"channels.{c}: the log {log.source} has no column '{c}'; it has "
+                           f"{', '.join(log.channels)}")
+        if s == "auto":
+            v, note = channel_scale(log.channels[c], log.t)
+        else:
+            v, note = float(s) * CHANNELS[c][1], "given"
+        scales.append(v)
+        notes[c] = note
+    problem = ClosedLoopProblem(log, names, lo, hi, dict(settings.plant), tuple(chosen),
+                                np.array(scales), settings.dt_s, settings.ga_dt_s or settings.dt_s)
+    try:  # parameters the model refuses (e.g. Fc = 0 fixed with friction free) before the GA
+        problem.params(0.5 * (lo + hi))
+    except EmaError as exc:
+        raise EmaError(f"plant: {exc.message}") from None
+    return problem, notes
+
+
+def fd_jacobian(problem: ClosedLoopProblem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Central-difference Jacobian of the weighted residuals at ``x`` -> (r(x), J[N, p]); the
+    base point and the 2p perturbed sets run in one kernel call (one-sided at a bound)."""
+    p = x.shape[0]
+    h = FD_REL_STEP * np.maximum(np.abs(x), 1e-3 * (problem.upper - problem.lower))
+    up = np.minimum(x + h, problem.upper)
+    dn = np.maximum(x - h, problem.lower)
+    X = np.repeat(x[None], 2 * p + 1, axis=0)
+    for j in range(p):
+        X[1 + j, j] = up[j]
+        X[1 + p + j, j] = dn[j]
+    R = problem.weighted_residuals(X)
+    J = (R[1:1 + p] - R[1 + p:]).T / (up - dn)[None, :]
+    return R[0], J
+
+
+def polish(problem: ClosedLoopProblem, x0: np.ndarray, max_iter: int) -> tuple[Any, int]:
+    """Bounded TRF least squares from ``x0`` in bound-scaled variables -> (scipy result, jacs)."""
+    from scipy.optimize import least_squares
+
+    lo, hi = problem.lower, problem.upper
+    span = hi - lo
+    cache: dict[bytes, np.ndarray] = {}
+    njev = 0
+
+    def fun(u: np.ndarray) -> np.ndarray:
+        x = lo + u * span
+        key = x.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = problem.weighted_residuals(x[None])[0]
+        return cache[key]
+
+    def jac(u: np.ndarray) -> np.ndarray:
+        nonlocal njev
+        njev += 1
+        _, J = fd_jacobian(problem, lo + u * span)
+        return J * span[None, :]
+
+    u0 = np.clip((x0 - lo) / span, 0.0, 1.0)
+    res = least_squares(fun, u0, jac=jac, bounds=(0.0, 1.0), method="trf", x_scale=1.0,
+                        xtol=POLISH_TOL, ftol=POLISH_TOL, gtol=POLISH_TOL,
+                        max_nfev=max_iter)
+    res.x = lo + res.x * span
+    return res, njev
+
+
+def alpha_scan(problem: ClosedLoopProblem, x: np.ndarray, r: np.ndarray, J: np.ndarray,
+               n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cost along alpha over its bounds with the others at ``x`` (slice), and linearised
+    in the others (profile) -> (alpha grid [rad], slice J, profile J); one kernel call."""
+    ja = problem.names.index("alpha")
+    grid = np.linspace(problem.lower[ja], problem.upper[ja], n)
+    grid = np.union1d(grid, [x[ja]])
+    X = np.repeat(x[None], grid.shape[0], axis=0)
+    X[:, ja] = grid
+    R = problem.weighted_residuals(X)
+    slice_J = np.sum(R**2, axis=1)
+    others = [k for k in range(x.shape[0]) if k != ja]
+    if others:
+        Jo = J[:, others]
+        coef, *_ = np.linalg.lstsq(Jo, R.T, rcond=None)  # R_i + Jo d_i ~ 0 -> d_i = -coef_i
+        prof = np.sum((R.T - Jo @ coef) ** 2, axis=0)
+        prof = np.minimum(prof, slice_J)
+    else:
+        prof = slice_J.copy()
+    return grid, slice_J, prof
+
+
+def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = None
+                    ) -> ClosedLoopFit:
+    """Identify the free parameters of ``settings`` from the log (``settings.data`` unless
+    ``log`` is given). Raises EmaError for bad logs, bounds and settings."""
+    t_start = time.perf_counter()
+    if log is None:
+        if settings.data is None:
+            raise EmaError("--closed-loop needs --data LOG.csv (or data: in the config)")
+        log = load_log(settings.data)
+    problem, notes = build_problem(settings, log)
+    timings: dict[str, float] = {}
+    warnings: list[str] = []
+
+    t0 = time.perf_counter()
+    problem.evaluate(problem.lower[None])  # load the kernel before timing
+    timings["load_s"] = time.perf_counter() - t0
+    problem.kernel_steps, problem.kernel_s, problem.evaluations = 0, 0.0, 0
+
+    t0 = time.perf_counter()
+    opts = preset("improved", pop=settings.ga.pop, generations=settings.ga.generations,
+                  patience=settings.ga.patience)
+    ga = run_ga(problem, opts, np.random.default_rng(np.random.SeedSequence(settings.seed)))
+    timings["ga_s"] = time.perf_counter() - t0
+    throughput = problem.kernel_steps / problem.kernel_s if problem.kernel_s > 0 else 0.0
+    if not np.isfinite(ga.cost):
+        raise EmaError(f"{log.source}: every simulation of the GA diverged; check the bounds "
+                       "and the fixed plant parameters", 1)
+
+    x = ga.x.copy()
+    nfev = njev = 0
+    status = "no polish"
+    restarted = False
+    t0 = time.perf_counter()
+    if settings.polish:
+        res, njev = polish(problem, x, settings.max_iter)
+        x, nfev, status = res.x, int(res.nfev), str(res.message)
+    timings["polish_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    r, J = fd_jacobian(problem, x)
+    grid = slc = prof = None
+    if "alpha" in problem.names:
+        grid, slc, prof = alpha_scan(problem, x, r, J, settings.profile_points)
+        cost = float(r @ r)
+        k = int(np.argmin(slc))
+        if slc[k] < (1.0 - RESTART_MARGIN) * cost and settings.polish:
+            x1 = x.copy()
+            x1[problem.names.index("alpha")] = grid[k]
+            res, nj = polish(problem, x1, settings.max_iter)
+            r1, J1 = fd_jacobian(problem, res.x)
+            if float(r1 @ r1) < cost:
+                x, r, J, restarted = res.x, r1, J1, True
+                nfev += int(res.nfev)
+                njev += nj
+                status = str(res.message)
+                grid, slc, prof = alpha_scan(problem, x, r, J, settings.profile_points)
+    timings["uncertainty_profile_s"] = time.perf_counter() - t0
+
+    cov, cond, dof = covariance(J, r, problem.groups())
+    unc = assess(problem.names, x, cov, dof, cond, problem.lower, problem.upper)
+    for j, n in enumerate(problem.names):
+        span = problem.upper[j] - problem.lower[j]
+        if min(x[j] - problem.lower[j], problem.upper[j] - x[j]) <= 1e-6 * span:
+            warnings.append(f"{n} = {x[j]:.6g} {BY_NAME[n].unit} sits on its bound "
+                            f"[{problem.lower[j]:g}, {problem.upper[j]:g}]: widen the bounds "
+                            "(its interval assumes an interior optimum)")
+    smooth = quadratic_check(problem, x, r, J, unc)
+    for j, ratio in enumerate(smooth):
+        if np.isfinite(ratio) and not 1.0 / QUADRATIC_RATIO <= ratio <= QUADRATIC_RATIO:
+            unc.determined[j] = False
+            unc.reasons[j].append(
+                f"the cost is not smooth at the scale of the standard error: moving "
+                f"{problem.names[j]} by 1 SE raises J {ratio:.3g} x what J^T J predicts (backlash "
+                "impacts make output-error costs rugged, docs/identification.md)")
+    if not np.all(unc.determined):
+        warnings.append("not determined: " + ", ".join(
+            n for n, d in zip(problem.names, unc.determined, strict=True) if not d)
+            + " (see identification.json, parameters.*.not_determined_because)")
+    Y = problem.predict(x[None])[0]
+    timings["total_s"] = time.perf_counter() - t_start
+    return ClosedLoopFit(settings, problem, ga.x, ga.cost, x, float(r @ r), r, J, unc, Y,
+                         ga.history, notes, grid, slc, prof, nfev, njev, status, restarted,
+                         timings, throughput, warnings, smooth)
+
+
+def quadratic_check(problem: ClosedLoopProblem, x: np.ndarray, r: np.ndarray, J: np.ndarray,
+                    unc: Uncertainty) -> np.ndarray:
+    """Whether the cost is locally quadratic at the scale of the uncertainty -> per parameter
+    the ratio of the actual mean rise of J at x +- d (others fixed; d = 1 SE, at least the
+    finite-difference step) to the rise ``d^2 * |J_j|^2`` the Jacobian predicts (1 for a
+    smooth cost; NaN where not checked). All 2p points run in one kernel call."""
+    p = x.shape[0]
+    ok = np.isfinite(unc.se) & (unc.se > 0)
+    ratio = np.full(p, np.nan)
+    idx = np.flatnonzero(ok)
+    if idx.size == 0:
+        return ratio
+    # at least the finite-difference step: on noise-free data the SE is at rounding level
+    step = np.maximum(unc.se, FD_REL_STEP * np.maximum(
+        np.abs(x), 1e-3 * (problem.upper - problem.lower)))
+    X = np.repeat(x[None], 2 * idx.size, axis=0)
+    for k, j in enumerate(idx):
+        X[2 * k, j] = min(x[j] + step[j], problem.upper[j])
+        X[2 * k + 1, j] = max(x[j] - step[j], problem.lower[j])
+    R = problem.weighted_residuals(X)
+    J0 = float(r @ r)
+    Jx = np.sum(R**2, axis=1)
+    for k, j in enumerate(idx):
+        d = np.array([X[2 * k, j] - x[j], X[2 * k + 1, j] - x[j]])
+        pred = d**2 * float(J[:, j] @ J[:, j])
+        act = np.array([Jx[2 * k], Jx[2 * k + 1]]) - J0
+        if np.all(pred > 0):
+            ratio[j] = float(np.mean(act) / np.mean(pred))
+    return ratio

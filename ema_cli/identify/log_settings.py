@@ -1,0 +1,178 @@
+"""Settings of the log identifications (pydantic, frozen, unknown keys are errors): the
+closed-loop fit, the friction sweep and synthetic data (``ema identify --closed-loop``,
+``--friction-sweep``, ``--make-data``). SI inside, units in the names or descriptions.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from ema_cli.config.base import (
+    NonNegFloat,
+    NonNegInt,
+    PlainName,
+    PositiveFloat,
+    PositiveInt,
+    Seed,
+    Strict,
+)
+from ema_cli.config.run import KEY_MARK
+from ema_cli.errors import EmaError
+from ema_cli.identify.closed_loop import CHANNELS, DEFAULT_FREE
+from ema_cli.model.params import check_value
+
+Scalar = float | int | str
+DEFAULT_DT_S = 1e-5  # fine step: polish, uncertainty, profile (docs/model.md §6) [s]
+DEFAULT_GA_DT_S = 5e-5  # the GA's step (see docs/identification.md for the check) [s]
+DEFAULT_CL_POP = 48  # closed-loop GA population [individuals]
+DEFAULT_CL_GENERATIONS = 40  # closed-loop GA generations, the initial one included
+DEFAULT_MAX_ITER = 30  # most Jacobian evaluations of the least-squares polish
+DEFAULT_PROFILE_POINTS = 41  # alpha values of the cost profile [points]
+MAX_CL_POP = 4096  # the largest closed-loop population [individuals]
+MAX_CL_GENERATIONS = 10_000  # the most closed-loop generations
+MAX_NOISE_PCT = 100.0  # the largest noise of synthetic data [% of the RMS]
+
+
+def _check_plant(v: dict[str, Any]) -> dict[str, Any]:
+    for name, value in v.items():
+        try:
+            check_value(name, value)
+        except EmaError as exc:
+            raise ValueError(f"{KEY_MARK}{name}{KEY_MARK}{exc.message}") from None
+    return v
+
+
+class ClosedLoopGA(Strict):
+    """The GA of a closed-loop fit (the improved real-coded GA of ``identify.ga``)."""
+
+    pop: PositiveInt = Field(DEFAULT_CL_POP, ge=2, le=MAX_CL_POP,
+                             description=f"population size, 2 .. {MAX_CL_POP}")
+    generations: PositiveInt = Field(
+        DEFAULT_CL_GENERATIONS, le=MAX_CL_GENERATIONS,
+        description="evaluated generations, the initial one included")
+    patience: NonNegInt = Field(0, le=MAX_CL_GENERATIONS,
+                                description="early stop after N stale generations (0: off)")
+
+
+class ClosedLoopSettings(Strict):
+    """Everything one ``ema identify --closed-loop`` run needs."""
+
+    name: PlainName = Field("identify-closed-loop", description="study name (a folder name)")
+    data: str | None = Field(None, description="the log: CSV with t_s, theta_ref_deg, "
+                                               "theta_load_deg [, omega_motor_rpm, current_a, "
+                                               "voltage_cmd_v]")
+    free: dict[str, tuple[float, float]] = Field(
+        default_factory=lambda: dict(DEFAULT_FREE),
+        description="free parameters -> [LO, HI] in SI (names of `ema params`)")
+    plant: dict[str, Scalar] = Field(default_factory=dict,
+                                     description="fixed model parameters, SI (`ema params`)")
+    channels: dict[str, PositiveFloat | Literal["auto"]] | None = Field(
+        None, description="channels fitted -> scale in the channel's edge unit, or auto (its "
+                          "noise estimate); null: every channel in the log, auto")
+    dt_s: PositiveFloat = Field(DEFAULT_DT_S, description="integration step of the polish and "
+                                                          "the uncertainty [s]")
+    ga_dt_s: PositiveFloat | None = Field(DEFAULT_GA_DT_S,
+                                          description="integration step of the GA [s] (null: dt_s)")
+    ga: ClosedLoopGA = Field(default_factory=ClosedLoopGA)
+    polish: bool = Field(True, description="least-squares polish after the GA")
+    max_iter: PositiveInt = Field(DEFAULT_MAX_ITER, le=1000,
+                                  description="most Jacobians of the polish")
+    profile_points: PositiveInt = Field(DEFAULT_PROFILE_POINTS, ge=3, le=1001,
+                                        description="alpha values of the cost profile")
+    seed: Seed = Field(0, description="seed of the GA")
+
+    @field_validator("plant")
+    @classmethod
+    def _plant(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _check_plant(v)
+
+    @field_validator("channels")
+    @classmethod
+    def _channels(cls, v: dict[str, Any] | None) -> dict[str, Any] | None:
+        if v is None:
+            return v
+        if not v:
+            raise ValueError("name at least one channel (or null: every channel in the log)")
+        for key in v:
+            if key not in CHANNELS:
+                raise ValueError(f"{KEY_MARK}{key}{KEY_MARK}unknown channel; expected one of "
+                                 f"{', '.join(CHANNELS)}")
+        return v
+
+    @model_validator(mode="after")
+    def _check(self) -> ClosedLoopSettings:
+        from ema_cli.identify.closed_loop import check_free
+
+        try:
+            check_free(self.free, self.plant)
+        except EmaError as exc:
+            raise ValueError(exc.message) from None
+        if self.ga_dt_s is not None and self.ga_dt_s < self.dt_s:
+            raise ValueError(f"ga_dt_s ({self.ga_dt_s:g} s) must not be finer than dt_s "
+                             f"({self.dt_s:g} s)")
+        return self
+
+
+class FrictionSweepSettings(Strict):
+    """Everything one ``ema identify --friction-sweep`` run needs."""
+
+    name: PlainName = Field("identify-friction-sweep", description="study name (a folder name)")
+    data: str | None = Field(None, description="CSV with omega_rpm, torque_nm")
+    delta: PositiveFloat = Field(1.0, le=10, description="Stribeck exponent, fixed [-]")
+    vs_range: tuple[PositiveFloat, PositiveFloat] | None = Field(
+        None, description="vs search range [rad/s] (null: min|w|/10 .. max|w|*10)")
+
+    @field_validator("vs_range")
+    @classmethod
+    def _vs(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not v[1] > v[0]:
+            raise ValueError(f"needs LO < HI, got [{v[0]:g}, {v[1]:g}]")
+        return v
+
+
+class MakeDataSettings(Strict):
+    """Synthetic data (``ema identify --make-data KIND``): truths are the model defaults, the
+    make-data defaults (alpha 3 mrad, friction on, sigma2 1e-4) and ``plant``."""
+
+    kind: Literal["closed-loop", "friction-sweep"] = Field("closed-loop",
+                                                          description="what to make")
+    noise_pct: NonNegFloat = Field(0.0, le=MAX_NOISE_PCT,
+                                   description="Gaussian noise, % of each channel's RMS")
+    seed: Seed = Field(0, description="seed of the noise")
+    plant: dict[str, Scalar] = Field(default_factory=dict,
+                                     description="true model parameters, SI (`ema params`)")
+    amplitude_deg: PositiveFloat = Field(5.0, le=180, description="chirp amplitude [deg]")
+    freq_hz: PositiveFloat = Field(0.5, description="chirp start frequency [Hz]")
+    freq_end_hz: PositiveFloat = Field(8.0, description="chirp end frequency [Hz]")
+    duration_s: PositiveFloat = Field(4.0, le=3600, description="log duration [s]")
+    sample_interval_s: PositiveFloat = Field(1e-3, description="log sample interval [s]")
+    dt_s: PositiveFloat = Field(DEFAULT_DT_S, description="integration step [s]")
+    speeds_rpm: tuple[PositiveFloat, PositiveFloat, PositiveInt] = Field(
+        (1.0, 1000.0, 20), description="friction sweep: lowest, highest |speed| [rpm] and "
+                                       "speeds per direction (log-spaced)")
+
+    @field_validator("plant")
+    @classmethod
+    def _plant(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _check_plant(v)
+
+    @model_validator(mode="after")
+    def _check(self) -> MakeDataSettings:
+        from ema_cli.sim.grid import off_grid, plan_steps
+
+        try:
+            plan_steps(self.duration_s, self.sample_interval_s, None)
+            plan_steps(self.duration_s, self.dt_s, self.sample_interval_s)
+        except EmaError as exc:
+            raise ValueError(exc.message) from None
+        if bool(off_grid(self.sample_interval_s, self.dt_s)):
+            raise ValueError("sample_interval_s must be a whole multiple of dt_s")
+        if self.duration_s / self.dt_s > 1e8:
+            raise ValueError("duration_s / dt_s is more than 1e8 steps")
+        lo, hi, n = self.speeds_rpm
+        if not hi > lo or n < 2 or n > 10_000:
+            raise ValueError(f"speeds_rpm: needs LO < HI and 2 .. 10000 speeds, got {lo:g}, "
+                             f"{hi:g}, {n}")
+        return self
