@@ -20,11 +20,12 @@ from __future__ import annotations
 from ema_cli.api.freqresp import FrequencyResponse, freqresp
 from ema_cli.api.identification import Identification, identify
 from ema_cli.api.margins import LoopMargins, margins
+from ema_cli.api.sensitivity import Sensitivity, sensitivity
 from ema_cli.api.simulation import Simulation, simulate
 from ema_cli.api.study import Sweep, sweep
 from ema_cli.api.threshold import Threshold, threshold
 from ema_cli.errors import EmaError
 
-__all__ = ["EmaError", "FrequencyResponse", "Identification", "LoopMargins", "Simulation",
-           "Sweep", "Threshold", "freqresp", "identify", "margins", "simulate", "sweep",
-           "threshold"]
+__all__ = ["EmaError", "FrequencyResponse", "Identification", "LoopMargins", "Sensitivity",
+           "Simulation", "Sweep", "Threshold", "freqresp", "identify", "margins", "sensitivity",
+           "simulate", "sweep", "threshold"]
