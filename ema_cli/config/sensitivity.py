@@ -184,7 +184,7 @@ class SensitivityConfig(RunConfig):
 
     inputs: list[NamedInput] | None = Field(
         None, description="input signals, each studied on its own (default: the run's 'input', "
-                          "named 'input')")
+                          "named 'input'; with 'inputs', 'input' must be absent or default)")
     factors: list[Factor] = Field(description="the factors that vary (at least one)")
     metrics: list[str] = Field(
         default_factory=lambda: list(DEFAULT_METRICS),
@@ -239,7 +239,7 @@ class SensitivityConfig(RunConfig):
             if not self.inputs:
                 raise as_value_error(EmaError("give at least one input (or leave 'inputs' out "
                                               "to use 'input')"), "inputs")
-            if "input" in self.model_fields_set:
+            if "input" in self.model_fields_set and self.input != InputConfig():
                 raise as_value_error(EmaError("give either 'input' or 'inputs', not both"),
                                      "inputs")
             seen_in: set[str] = set()
