@@ -273,6 +273,7 @@ def run_sensitivity(
     source: str = "config",
     overrides: Sequence[tuple[str, Any]] = (),
     write: bool = True,
+    reuse_finished: bool = False,
     log: Callable[[str], None] | None = None,
 ) -> SensitivityResult:
     """Run a sensitivity study end to end and write its folder (``write`` False: nothing is
@@ -283,14 +284,23 @@ def run_sensitivity(
                (resumed: finished samples come from the job cache)
     cache_dir  job cache; None: ``sweep_report.default_cache_dir(out)`` when writing
 
+    reuse_finished  ``out`` belongs to a run being resumed (``ema reproduce``): if it holds the
+               finished study of these very inputs, it is kept as it is (the indices are
+               recomputed from the job cache, nothing is written)
+
     On Ctrl-C the manifest says ``interrupted`` and the exception propagates; the finished
     samples are in the job cache for the rerun.
     """
+    reused = False
     if write:
         method, n = resolve_method(cfg, method, n)
-        check_output(out, COMMAND, fingerprint(cfg, method, n), resume=True)
         if cache_dir is None:
             cache_dir = default_cache_dir(out)
+        fp = fingerprint(cfg, method, n)
+        if reuse_finished and out is not None and finished_study(Path(out), fp):
+            write, reused = False, True
+        else:
+            check_output(out, COMMAND, fp, resume=True)
 
     def on_start(res: SensitivityResult) -> None:
         if write:
@@ -306,10 +316,27 @@ def run_sensitivity(
         if res.complete:
             finish_output(res.folder)
 
-    return compute_sensitivity(cfg, method, n, n_jobs=n_jobs, backend=backend,
-                               scheduler=scheduler, force=force, progress=progress,
-                               cache_dir=cache_dir, base_dir=base_dir, source=source,
-                               on_start=on_start, on_finish=on_finish, log=log)
+    res = compute_sensitivity(cfg, method, n, n_jobs=n_jobs, backend=backend,
+                              scheduler=scheduler, force=force, progress=progress,
+                              cache_dir=cache_dir, base_dir=base_dir, source=source,
+                              on_start=on_start, on_finish=on_finish, log=log)
+    if reused:
+        res.folder = Path(out) if out is not None else None
+    return res
+
+
+def finished_study(folder: Path, fp: str) -> bool:
+    """True if ``folder`` holds the finished ``ema sensitivity`` study with fingerprint ``fp``."""
+    import json
+
+    from ema_cli.report.rundir import MARKER
+
+    try:
+        mark = json.loads((folder / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return (isinstance(mark, dict) and mark.get("command") == COMMAND
+            and mark.get("fingerprint") == fp and mark.get("finished") is True)
 
 
 def save_sensitivity(res: SensitivityResult, out: Path | None = None,
