@@ -152,3 +152,16 @@ def test_bad_input_is_one_line(tmp_path, args, needle):
     assert r.exit_code == 2, r.output
     assert needle in r.output and "Traceback" not in r.output, r.output
     assert not out.exists()
+
+
+def test_a_finished_study_is_kept_by_a_resumed_reproduction(tmp_path):
+    """``reuse_finished`` (what `ema reproduce` passes): a finished folder of the same study is
+    not rewritten; its indices come back from the job cache, nothing is recomputed."""
+    cfg = load_config(write_study(tmp_path), (), SensitivityConfig)
+    out = tmp_path / "out"
+    first = run_sensitivity(cfg, out, progress=False)
+    stamp = (out / "indices.csv").stat().st_mtime_ns
+    again = run_sensitivity(cfg, out, progress=False, reuse_finished=True)
+    assert again.computed == 0 and again.cached == 160 and again.folder == out
+    assert (out / "indices.csv").stat().st_mtime_ns == stamp
+    pd.testing.assert_frame_equal(again.indices, first.indices)
