@@ -165,3 +165,13 @@ def test_a_finished_study_is_kept_by_a_resumed_reproduction(tmp_path):
     assert again.computed == 0 and again.cached == 160 and again.folder == out
     assert (out / "indices.csv").stat().st_mtime_ns == stamp
     pd.testing.assert_frame_equal(again.indices, first.indices)
+
+
+def test_validate_knows_a_sensitivity_config():
+    from pathlib import Path
+
+    cfg = Path(__file__).resolve().parents[2] / "configs" / "sensitivity.yaml"
+    r = runner.invoke(app, ["validate", str(cfg)])
+    assert r.exit_code == 0, r.output
+    text = " ".join(r.output.split())
+    assert "valid sensitivity study; 10 factors, 2 input(s), sobol n = 4096 -> 98,304 runs" in text
