@@ -85,14 +85,13 @@ def indices_figure(res: SensitivityResult, input_name: str) -> Figure:
             ax.barh(y - h / 2, t["S1"], h, xerr=t["S1_conf"], color="C1", capsize=3,
                     label="first order S1")
             ax.axvline(NEGLIGIBLE_ST, color="0.5", lw=0.8, ls=":")
-            ax.set_xlabel(f"Sobol index [-] (error bars: {res.cfg.sensitivity.conf_level:.0%} "
-                          "confidence intervals)")
+            ax.set_xlabel(f"Sobol index [-] (bars: {res.cfg.sensitivity.conf_level:.0%} CI)")
         else:
             ax.barh(y + h / 2, t["mu_star"], h, xerr=t["mu_star_conf"], color="C0", capsize=3,
                     label="mu* (mean |EE|)")
             ax.barh(y - h / 2, t["sigma"], h, color="C2", label="sigma (spread of EE)")
-            ax.set_xlabel("elementary effect [metric per unit of the factor range] (error "
-                          f"bars: {res.cfg.sensitivity.conf_level:.0%} confidence intervals)")
+            ax.set_xlabel("elementary effect [metric / factor range] (bars: "
+                          f"{res.cfg.sensitivity.conf_level:.0%} CI)")
         ax.set_yticks(y, t["factor"])
         ax.set_title(_metric_name(metric, res.cfg.sensitivity.transform), fontsize=10)
         ax.grid(True, axis="x", alpha=0.3)
