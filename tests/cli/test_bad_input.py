@@ -29,6 +29,8 @@ WRITERS = {
     "margins": ["margins"],
     "freqresp": ["freqresp", "--amplitudes", "1", "--f-min", "5", "--f-max", "10", "--n", "2"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
+    "sensitivity": ["sensitivity", str(ROOT / "configs" / "sensitivity.yaml"), "--n", "1",
+                    "--set", "simulation.duration_s=0.01", "--no-progress", "-j", "1"],
 }
 
 
@@ -74,7 +76,8 @@ def test_out_holding_other_files_is_never_overwritten(tmp_path, cmd):
     assert (tmp_path / "mine.csv").read_text() == "precious"
 
 
-@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins", "freqresp"])
+@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins", "freqresp",
+                                 "sensitivity"])
 def test_a_finished_run_is_not_overwritten(tmp_path, cmd):
     out = tmp_path / "run"
     r = invoke(*WRITERS[cmd], "--out", str(out))

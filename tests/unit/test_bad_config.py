@@ -447,7 +447,10 @@ def test_bundled_experiment_and_configs_still_validate():
     root = Path(__file__).resolve().parents[2]
     load_experiment(root / "experiments" / "paper2020.yaml")
     for f in sorted((root / "configs").glob("*.yaml")):
-        model = IdentifySettings if f.stem == "identify" else StudyConfig
+        from ema_cli.config.sensitivity import SensitivityConfig
+
+        model = {"identify": IdentifySettings, "sensitivity": SensitivityConfig}.get(
+            f.stem, StudyConfig)
         load_config(f, (), model)
 
 
