@@ -33,11 +33,12 @@ test: $(TSTAMP)  ## lint, then the whole test suite
 	$(BIN)/ruff check ema_cli tests
 	$(BIN)/python -m pytest
 
-bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up
+bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up, sensitivity
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
 	$(BIN)/python experiments/bench_identify_logs.py
+	$(BIN)/python experiments/bench_sensitivity.py
 
 lint: $(TSTAMP)  ## ruff
 	$(BIN)/ruff check ema_cli tests experiments

@@ -13,7 +13,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -21,9 +21,12 @@ import pandas as pd
 from ema_cli.analysis.claims import Verdict, evaluate_claims
 from ema_cli.analysis.threshold import ThresholdResult, find_threshold, simulation_evaluator
 from ema_cli.config.criteria import Criterion
-from ema_cli.config.experiment import ExperimentConfig, ThresholdSpec
+from ema_cli.config.experiment import ExperimentConfig, SensitivitySpec, ThresholdSpec
 from ema_cli.config.loader import input_signal, load_config, validate
 from ema_cli.config.study import StudyConfig
+
+if TYPE_CHECKING:
+    from ema_cli.config.sensitivity import SensitivityConfig
 from ema_cli.errors import EmaError
 from ema_cli.identify.settings import IdentifySettings
 from ema_cli.model.nonlinearities import lookup
@@ -52,6 +55,8 @@ class Reproduction:
     thresholds: list[ThresholdOutcome] = field(default_factory=list)
     identification: dict[str, Any] | None = None
     ranking: pd.DataFrame | None = None
+    sensitivity: Any = None  # sensitivity.run.SensitivityResult of the experiment's study
+    sensitivity_ranking: pd.DataFrame | None = None
     scalars: dict[str, float] = field(default_factory=dict)
     verdicts: list[Verdict] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
@@ -68,6 +73,8 @@ def load_experiment(path: Path, overrides: Sequence[tuple[str, Any]] = ()) -> Ex
     if exp.identification is not None:
         validate(IdentifySettings, exp.identification.settings,
                  f"{path}: identification.settings")
+    if exp.sensitivity is not None:
+        sensitivity_config(path, exp.sensitivity)  # refused before anything is written
     checked: set[str] = set()
     for what, ident, rel in [*(("study", s.id, s.config) for s in exp.studies),
                              *(("threshold", t.id, t.config) for t in exp.thresholds)]:
@@ -86,6 +93,70 @@ def study_config(path: Path, rel: str) -> tuple[StudyConfig, Path]:
     """The study config ``rel`` (relative to the experiment file ``path``) and its path."""
     p = path.parent / rel
     return load_config(p, (), model=StudyConfig), p
+
+
+def sensitivity_config(path: Path, spec: SensitivitySpec) -> tuple[SensitivityConfig, Path]:
+    """The experiment's sensitivity config and its path; the input, metric and factors the spec
+    names must be in it."""
+    from ema_cli.config.sensitivity import SensitivityConfig
+
+    p = path.parent / spec.config
+    where = f"{path}: sensitivity"
+    if not p.is_file():
+        raise EmaError(f"{where}: config '{spec.config}' does not exist")
+    try:
+        cfg = load_config(p, (), SensitivityConfig)
+    except EmaError as exc:
+        raise EmaError(f"{where}: {exc.message}", exc.exit_code) from None
+    inputs = [n for n, _ in cfg.input_list()]
+    factors = [f.label for f in cfg.factors]
+    if spec.input not in inputs:
+        raise EmaError(f"{where}.input: '{spec.input}' is not an input of {spec.config} "
+                       f"({', '.join(inputs)})")
+    if spec.metric not in cfg.metrics:
+        raise EmaError(f"{where}.metric: '{spec.metric}' is not a metric of {spec.config} "
+                       f"({', '.join(cfg.metrics)})")
+    for key, name in [("paper_first", spec.paper_first),
+                      *((f"studies.{k}", v) for k, v in spec.studies.items())]:
+        if name not in factors:
+            raise EmaError(f"{where}.{key}: '{name}' is not a factor of {spec.config} "
+                           f"({', '.join(factors)})")
+    return cfg, p
+
+
+def compute_sensitivity_ranking(rep: Reproduction) -> pd.DataFrame:
+    """The factors ranked by Sobol ST (or Morris mu*) per input and metric, with the rank of the
+    same nonlinearity in the one-at-a-time ranking (``oat_rank``, where a study varies it);
+    fills the ``sensitivity.*`` scalars from the spec's input and metric."""
+    from ema_cli.sensitivity.analyze import ranking
+
+    spec = rep.exp.sensitivity
+    res = rep.sensitivity
+    assert spec is not None and res is not None
+    oat: dict[str, int] = {}
+    if rep.ranking is not None:
+        for _, row in rep.ranking.iterrows():
+            if str(row["study"]) in spec.studies:
+                oat[spec.studies[str(row["study"])]] = int(row["rank"])
+    frames = []
+    ix = res.indices
+    for _, t in ix.groupby(["input", "metric"], sort=False):
+        r = ranking(t, res.method)
+        r = r[["input", "metric", *[c for c in r.columns if c not in ("input", "metric")]]]
+        r["oat_rank"] = [oat.get(str(f), math.nan) for f in r["factor"]]
+        frames.append(r)
+    out = pd.concat(frames, ignore_index=True)
+    key = "ST" if res.method == "sobol" else "mu_star"
+    mine = out[(out["input"] == spec.input) & (out["metric"] == spec.metric)]
+    order = [str(f) for f in mine["factor"]]
+    rep.scalars["sensitivity.paper_first_rank"] = float(order.index(spec.paper_first) + 1)
+    rep.scalars["sensitivity.first_is_paper_first"] = float(order[0] == spec.paper_first)
+    rep.scalars["sensitivity.paper_first_st"] = float(
+        mine[mine["factor"] == spec.paper_first][key].iloc[0])
+    rep.scalars["sensitivity.first_st"] = float(mine[key].iloc[0])
+    for k, name in enumerate(order):
+        rep.scalars[f"sensitivity.rank.{name}"] = float(k + 1)
+    return out
 
 
 def compute_threshold(path: Path, spec: ThresholdSpec) -> ThresholdOutcome:
@@ -167,5 +238,7 @@ def conclude(rep: Reproduction) -> Reproduction:
         rep.scalars["ranking.paper_first_rank"] = (
             float(order.index(named) + 1) if named in order else math.nan)
         rep.scalars["ranking.first_is_paper_first"] = float(order[0] == named)
+    if exp.sensitivity is not None and rep.sensitivity is not None:
+        rep.sensitivity_ranking = compute_sensitivity_ranking(rep)
     rep.verdicts = evaluate_claims(exp.claims, rep.studies, rep.scalars)
     return rep

@@ -132,8 +132,9 @@ def sweep_cmd(
                        "are cached", 1)
 
 
-KINDS = ("auto", "study", "experiment", "identify", "acceptance")
-"""What `ema validate` can check: a study config, an experiment batch, identification settings."""
+KINDS = ("auto", "study", "experiment", "identify", "acceptance", "sensitivity")
+"""What `ema validate` can check: a study config, an experiment batch, identification settings,
+an acceptance spec, a sensitivity study."""
 
 
 def detect_kind(config: Path) -> str:
@@ -148,6 +149,8 @@ def detect_kind(config: Path) -> str:
     if keys & {"k_range", "alpha_range", "c_range", "ga", "synthetic", "method", "fit_c",
                "columns", "data", "runs"}:
         return "identify"
+    if keys & {"factors", "sensitivity", "inputs"}:
+        return "sensitivity"
     return "study"
 
 
@@ -158,7 +161,8 @@ def validate_cmd(
     kind: Annotated[str, typer.Option(
         "--kind", help="What CONFIG is: study (`ema sweep`/`simulate`), experiment "
                        "(`ema reproduce`), identify (`ema identify`), acceptance (`ema "
-                       "acceptance`) or auto (from its keys).")
+                       "acceptance`), sensitivity (`ema sensitivity`) or auto (from its "
+                       "keys).")
     ] = "auto",
 ) -> None:
     """Check CONFIG against its schema (fast: nothing is simulated); for a study, count its
@@ -192,6 +196,17 @@ def validate_cmd(
         s = load_config(config, overrides, IdentifySettings)
         console.print(f"{config}: valid identification settings; method {s.method}, "
                       f"{s.runs} run(s), data {s.data or 'synthetic'}")
+        return
+    if kind == "sensitivity":
+        from ema_cli.config.loader import load_config
+        from ema_cli.config.sensitivity import SensitivityConfig
+        from ema_cli.sensitivity.run import resolve_method
+
+        c = load_config(config, overrides, SensitivityConfig)
+        method, n = resolve_method(c, None, None)
+        console.print(f"{config}: valid sensitivity study; {len(c.factors)} factors, "
+                      f"{len(c.input_list())} input(s), {method} n = {n} -> "
+                      f"{c.runs(method, n):,} runs")
         return
     from ema_cli.sweep.expand import check_size
 

@@ -14,7 +14,14 @@ from typing import Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from ema_cli.config.base import FiniteFloat, NonNegFloat, PlainName, PositiveFloat, Strict
+from ema_cli.config.base import (
+    FiniteFloat,
+    NonNegFloat,
+    PlainName,
+    PositiveFloat,
+    PositiveInt,
+    Strict,
+)
 from ema_cli.config.claims import Claim, ScalarCheck
 from ema_cli.config.criteria import DEFAULT_RTOL, MAX_RTOL, Criterion
 from ema_cli.errors import EmaError
@@ -26,6 +33,11 @@ FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 """File types a study figure may be written as."""
 RANKING_SCALARS = ("ranking.paper_first_rank", "ranking.first_is_paper_first")
 """The scalar results a ranking adds (for scalar claims)."""
+SENSITIVITY_SCALARS = ("sensitivity.paper_first_rank", "sensitivity.first_is_paper_first",
+                       "sensitivity.paper_first_st", "sensitivity.first_st")
+"""The scalar results the global sensitivity ranking adds (for scalar claims): the Sobol ST rank
+of the paper's first, whether it is first, its ST, and the ST of the factor ranked first; also
+``sensitivity.rank.<factor>`` for every factor."""
 
 
 def _known_metric(name: str) -> str:
@@ -153,6 +165,31 @@ class RankingSpec(Strict):
     _metric = field_validator("metric")(_known_metric)
 
 
+class SensitivitySpec(Strict):
+    """A global sensitivity study (`ema sensitivity`) ranking the nonlinearities, beside the
+    paper's ranking and the one-at-a-time ranking of the studies."""
+
+    config: str = Field(description="sensitivity config (path relative to the experiment file)")
+    method: Literal["sobol", "morris"] = "sobol"
+    n: PositiveInt = Field(description="Sobol base samples (a power of two) or Morris "
+                                       "trajectories; sized for CI")
+    input: PlainName = Field(description="the input of the config whose ranking the claims read")
+    metric: str = "iae_pos_deg_s"
+    paper: str = ""
+    paper_first: str = Field(description="the factor the paper names the worst")
+    studies: dict[PlainName, str] = Field(
+        default_factory=dict, description="study id of the one-at-a-time ranking -> the factor "
+                                          "it varies (for the side-by-side table)")
+
+    _metric = field_validator("metric")(_known_metric)
+
+    @model_validator(mode="after")
+    def _check(self) -> SensitivitySpec:
+        if self.method == "sobol" and self.n & (self.n - 1):
+            raise ValueError(f"n must be a power of two for Sobol sampling, got {self.n}")
+        return self
+
+
 def _unique(ids: list[str], what: str) -> None:
     seen: set[str] = set()
     for k, i in enumerate(ids):
@@ -172,6 +209,7 @@ class ExperimentConfig(Strict):
     thresholds: list[ThresholdSpec] = Field(default_factory=list)
     identification: IdentificationSpec | None = None
     ranking: RankingSpec | None = None
+    sensitivity: SensitivitySpec | None = None
     claims: list[Claim] = Field(default_factory=list)
 
     @model_validator(mode="after")
@@ -179,7 +217,8 @@ class ExperimentConfig(Strict):
         if not self.studies and not self.claims:
             raise ValueError("an experiment needs at least one study or claim; this one has "
                              "neither")
-        if not (self.studies or self.thresholds or self.identification is not None):
+        if not (self.studies or self.thresholds or self.identification is not None
+                or self.sensitivity is not None):
             raise ValueError("an experiment needs something to run: studies, thresholds or an "
                              "identification")
         _unique([s.id for s in self.studies], "study id")
@@ -195,6 +234,11 @@ class ExperimentConfig(Strict):
             if self.ranking.paper_first and self.ranking.paper_first not in studies:
                 raise ValueError(f"ranking.paper_first: unknown study "
                                  f"'{self.ranking.paper_first}'; studies: {known}")
+        if self.sensitivity is not None:
+            for sid in self.sensitivity.studies:
+                if sid not in studies:
+                    raise ValueError(f"sensitivity.studies: unknown study '{sid}'; studies: "
+                                     f"{known}")
         for k, c in enumerate(self.claims):
             if c.figure and c.figure not in studies:
                 raise ValueError(f"claims.{k} ({c.id}): figure '{c.figure}' is not a study id; "
@@ -214,7 +258,11 @@ class ExperimentConfig(Strict):
             return
         if name in RANKING_SCALARS and self.ranking is not None:
             return
+        if self.sensitivity is not None and (name in SENSITIVITY_SCALARS
+                                             or name.startswith("sensitivity.rank.")):
+            return
         results = thresholds + (["identification.<key>"] if self.identification else []) + (
-            list(RANKING_SCALARS) if self.ranking else [])
+            list(RANKING_SCALARS) if self.ranking else []) + (
+            [*SENSITIVITY_SCALARS, "sensitivity.rank.<factor>"] if self.sensitivity else [])
         raise ValueError(f"claims.{k} ({cid}): no result named '{name}'; the experiment "
                          f"computes: {', '.join(results) or 'no scalar results'}")

@@ -22,6 +22,7 @@ from ema_cli.analysis.reproduce import (
     compute_thresholds,
     conclude,
     load_experiment,
+    sensitivity_config,
     study_config,
 )
 from ema_cli.config.base import check_plain_name
@@ -30,6 +31,7 @@ from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
 from ema_cli.report.identify_figures import identification_summary
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
+from ema_cli.report.sensitivity_report import run_sensitivity
 from ema_cli.report.sweep_report import default_cache_dir, run_sweep
 from ema_cli.report.threshold_figures import threshold_figure
 
@@ -69,6 +71,16 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
         rep.sweeps[s.id] = res
     rep.timings["studies"] = time.perf_counter() - t0
     compute_thresholds(rep, log)
+    if rep.exp.sensitivity is not None:
+        t0 = time.perf_counter()
+        spec = rep.exp.sensitivity
+        cfg, cpath = sensitivity_config(path, spec)
+        log(f"sensitivity: {cpath} ({spec.method}, n = {spec.n})")
+        rep.sensitivity = run_sensitivity(
+            cfg, _under(out, "sensitivity"), spec.method, spec.n, n_jobs=n_jobs,
+            progress=progress, cache_dir=default_cache_dir(out), base_dir=cpath.parent,
+            source=str(cpath), reuse_finished=True)
+        rep.timings["sensitivity"] = time.perf_counter() - t0
     if rep.exp.identification is not None:
         t0 = time.perf_counter()
         log("identification (paper §3.1)")
@@ -136,6 +148,8 @@ def write_reproduction(rep: Reproduction, out: Path, wall: float) -> Path:
         write_csv(out / "thresholds.csv", pd.DataFrame(thr_rows))
     if rep.ranking is not None:
         write_csv(out / "ranking.csv", rep.ranking)
+    if rep.sensitivity_ranking is not None:
+        write_csv(out / "sensitivity_ranking.csv", rep.sensitivity_ranking, float_format="%.6g")
     for sid, df in rep.studies.items():
         write_csv(_under(out, "tables", f"{sid}_metrics.csv"), df, float_format="%.9g")
     report = out / "REPORT.md"
@@ -145,6 +159,52 @@ def write_reproduction(rep: Reproduction, out: Path, wall: float) -> Path:
         claims={"total": len(rep.verdicts), "failed": [v.claim.id for v in rep.failed]},
         scalars=rep.scalars))
     return report
+
+
+def sensitivity_section(rep: Reproduction) -> list[str]:
+    """REPORT.md's global-sensitivity ranking: per input and metric the factors by Sobol ST
+    (or Morris mu*) with the one-at-a-time rank, and the verdict against the paper."""
+    spec, res, table = rep.exp.sensitivity, rep.sensitivity, rep.sensitivity_ranking
+    if spec is None or res is None or table is None:
+        return []
+    key = "ST" if res.method == "sobol" else "mu_star"
+    cfg = res.cfg
+    tr = " of log10(metric)" if cfg.sensitivity.transform == "log10" else ""
+    lines = ["## Ranking of the nonlinearities by global sensitivity", "",
+             f"`ema sensitivity {spec.config}` ({res.method}, n = {res.n}: "
+             f"{res.design.n_rows:,} one-second runs per input, {len(cfg.factors)} factors over "
+             f"the ranges of the config; indices{tr}). Beside each factor its rank in the "
+             "one-at-a-time ranking above (worst IAE ratio at the paper's magnitudes), where a "
+             f"study varies it. The paper: {spec.paper}", ""]
+    oat = rep.ranking
+    if oat is not None and len(oat):
+        lines += [f"One-at-a-time ranking (first to last): "
+                  f"{', '.join(f'{spec.studies.get(str(s), str(s))}' for s in oat['study'])}.",
+                  ""]
+    for (inp, metric), t in table.groupby(["input", "metric"], sort=False):
+        top = t.head(6)
+        cols = ["rank", "factor", key, f"{key}_conf", "oat_rank"]
+        if key == "ST":
+            cols.insert(4, "S1")
+        lines += [f"**Input {inp}, `{metric}`** (first six):", "", _md_table(top[cols]), ""]
+    mine = table[(table["input"] == spec.input) & (table["metric"] == spec.metric)]
+    first = str(mine["factor"].iloc[0])
+    rank = int(rep.scalars["sensitivity.paper_first_rank"])
+    agree = "agrees" if first == spec.paper_first else "differs"
+    lines += [f"On input {spec.input}, `{spec.metric}`: the global ranking puts **{first}** "
+              f"first ({key} {float(mine[key].iloc[0]):.3g}) and {spec.paper_first} "
+              f"{_ordinal(rank)} ({key} "
+              f"{rep.scalars['sensitivity.paper_first_st']:.3g}); the paper names "
+              f"**{spec.paper_first}** — our model {agree}.", ""]
+    for f in ("indices", "convergence"):
+        name = f"{f}_{spec.input}.png"
+        if (res.folder is not None and (res.folder / name).is_file()) or res.folder is None:
+            lines += [f"![{f}](sensitivity/{name})", ""]
+    return lines
+
+
+def _ordinal(k: int) -> str:
+    return f"{k}{'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')}"
 
 
 def render_report(rep: Reproduction, wall: float) -> str:
@@ -195,6 +255,7 @@ def render_report(rep: Reproduction, wall: float) -> str:
         agree = "agrees" if first == exp.ranking.paper_first else "differs"
         lines += [f"Our model ranks **{first}** first; the paper names "
                   f"**{exp.ranking.paper_first}** — our model {agree}.", ""]
+    lines += sensitivity_section(rep)
     if rep.identification is not None:
         lines += ["## Identification (paper §3.1)", ""]
         lines += [_md_table(pd.DataFrame([{"quantity": k, "value": _g(v)}

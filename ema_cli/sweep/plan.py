@@ -309,7 +309,7 @@ def _values_and_label(spec: JobSpec, axes: list[AxisInfo], cfg: StudyConfig,
                 if info.kind == "parameter":
                     continue
                 neutral = neutral_value(t)
-                for other in [k for k in nls if lookup(k) == lookup(t)]:
+                for other in [k for k in nls if lookup(k) is lookup(t)]:
                     del nls[other]
                 if neutral is not None:
                     nls[t] = neutral
@@ -335,7 +335,7 @@ def _values_and_label(spec: JobSpec, axes: list[AxisInfo], cfg: StudyConfig,
             continue
         applied, pct = _apply_point(pt, scales)
         pl = lookup(pt.target)
-        for other in [k for k in nls if k != pt.target and lookup(k) == pl]:
+        for other in [k for k in nls if k != pt.target and lookup(k) is pl]:
             del nls[other]  # the axis replaces the study's fixed setting of the same placement
         nls[pt.target] = applied
         if info.kind == "placement":

@@ -30,6 +30,8 @@ WRITERS = {
     "freqresp": ["freqresp", "--amplitudes", "1", "--f-min", "5", "--f-max", "10", "--n", "2"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
     "acceptance": ["acceptance", str(ROOT / "configs" / "acceptance.yaml"), "--only", "margins"],
+    "sensitivity": ["sensitivity", str(ROOT / "configs" / "sensitivity.yaml"), "--n", "1",
+                    "--set", "simulation.duration_s=0.01", "--no-progress", "-j", "1"],
 }
 
 
@@ -76,7 +78,7 @@ def test_out_holding_other_files_is_never_overwritten(tmp_path, cmd):
 
 
 @pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins", "freqresp",
-                                 "acceptance"])
+                                 "acceptance", "sensitivity"])
 def test_a_finished_run_is_not_overwritten(tmp_path, cmd):
     out = tmp_path / "run"
     r = invoke(*WRITERS[cmd], "--out", str(out))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 from typer.testing import CliRunner
 
@@ -88,3 +89,80 @@ def test_reproduce_bad_experiment_is_clear(tmp_path):
     r = runner.invoke(app, ["reproduce", str(exp)])
     assert r.exit_code == 2 and "bogus: unknown key" in r.output
     assert "Traceback" not in r.output
+
+
+SENS = """name: tinysens
+inputs: [{name: s5, kind: step, amplitude_deg: 5.0}]
+simulation: {duration_s: 0.1, output_interval_s: null}
+factors:
+  - {nonlinearity: deadzone2, range: [0.001, 0.1], scale: log}
+  - {nonlinearity: gap1, range: [0.05, 10.0], scale: log}
+  - {name: dummy, parameter: T_load, range: [0.0, 1.0e-9]}
+metrics: [iae_pos_deg_s]
+sensitivity: {num_resamples: 50, transform: log10}
+parallel: {n_jobs: 1}
+"""
+
+SENS_EXPERIMENT = """name: sensbatch
+studies:
+  - id: figA
+    config: tiny.yaml
+    figure: figA.png
+    caption: "Figure A: dead band"
+ranking:
+  metric: iae_pos_deg_s
+  studies: [figA]
+  paper_first: figA
+sensitivity:
+  config: sens.yaml
+  n: 16
+  input: s5
+  metric: iae_pos_deg_s
+  paper: the dead band is worst
+  paper_first: PAPER_FIRST
+  studies: {figA: deadzone2}
+claims:
+  - id: stiff_first
+    paper: p
+    statement: the stiffness ranks first by Sobol ST
+    check: {kind: scalar, name: sensitivity.rank.gap1, op: "<=", value: 1}
+  - id: dummy_last
+    paper: p
+    statement: the dummy has ST below 0.02
+    check: {kind: scalar, name: sensitivity.rank.dummy, op: ">=", value: 3}
+"""
+
+
+def test_reproduce_ranks_by_global_sensitivity(tmp_path):
+    (tmp_path / "tiny.yaml").write_text(STUDY)
+    (tmp_path / "sens.yaml").write_text(SENS)
+    exp = tmp_path / "exp.yaml"
+    exp.write_text(SENS_EXPERIMENT.replace("PAPER_FIRST", "deadzone2"))
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["reproduce", str(exp), "--out", str(out), "--n-jobs", "1"])
+    assert r.exit_code == 0, r.output
+    claims = pd.read_csv(out / "claims.csv")
+    assert claims["result"].tolist() == ["PASS", "PASS"], claims
+    ranking = pd.read_csv(out / "sensitivity_ranking.csv")
+    mine = ranking[ranking["input"] == "s5"]
+    assert mine["factor"].tolist()[0] == "gap1"
+    assert mine.set_index("factor")["oat_rank"]["deadzone2"] == 1  # the only OAT study
+    indices = pd.read_csv(out / "sensitivity" / "indices.csv").set_index("factor")
+    assert indices.loc["dummy", "ST"] < 0.02
+    # the ranking table is the folder's indices, sorted by ST
+    np.testing.assert_allclose(mine["ST"], sorted(indices["ST"], reverse=True), rtol=1e-5,
+                               atol=1e-12)
+    report = (out / "REPORT.md").read_text()
+    assert "Ranking of the nonlinearities by global sensitivity" in report
+    assert "the paper names **deadzone2** — our model differs" in report
+
+
+def test_reproduce_refuses_an_unknown_sensitivity_factor(tmp_path):
+    (tmp_path / "tiny.yaml").write_text(STUDY)
+    (tmp_path / "sens.yaml").write_text(SENS)
+    exp = tmp_path / "exp.yaml"
+    exp.write_text(SENS_EXPERIMENT.replace("PAPER_FIRST", "friction1"))
+    r = runner.invoke(app, ["reproduce", str(exp), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2
+    assert "sensitivity.paper_first: 'friction1' is not a factor of sens.yaml" in r.output
+    assert not (tmp_path / "o").exists()

@@ -450,6 +450,9 @@ def test_bundled_experiment_and_configs_still_validate():
 
     models = {"identify": IdentifySettings, "acceptance": AcceptanceSpec}
     for f in sorted((root / "configs").glob("*.yaml")):
+        from ema_cli.config.sensitivity import SensitivityConfig
+
+        models["sensitivity"] = SensitivityConfig
         load_config(f, (), models.get(f.stem, StudyConfig))
 
 

@@ -1,0 +1,124 @@
+"""``api.sensitivity``: global sensitivity of the metrics to the factors (Morris or Sobol), as
+``ema sensitivity`` runs it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ema_cli.api._inputs import (
+    ConfigSource,
+    Overrides,
+    base_dir,
+    folder_arg,
+    override_pairs,
+    source_name,
+)
+from ema_cli.errors import EmaError
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from ema_cli.sensitivity.run import SensitivityResult
+
+
+@dataclass
+class Sensitivity:
+    """A finished sensitivity study: ``result`` is ``sensitivity.run.SensitivityResult``.
+
+    ``indices``: one row per (input, metric, factor) with S1, S1_conf, ST, ST_conf (Sobol) or
+    mu_star, mu_star_conf, sigma, mu (Morris); ``metrics``: one row per simulation (input,
+    design row, factor values, metrics in edge units); ``convergence``: the indices on the
+    nested designs n/32 .. n.
+    """
+
+    result: SensitivityResult
+    overrides: list[tuple[str, Any]] = field(default_factory=list)
+
+    @property
+    def indices(self) -> pd.DataFrame:
+        """indices.csv."""
+        return self.result.indices
+
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """One row per simulation: input, row, key, status, factor values, metrics."""
+        return self.result.samples
+
+    @property
+    def convergence(self) -> pd.DataFrame:
+        """convergence.csv: the indices on nested prefixes of the design (column ``n``)."""
+        return self.result.convergence
+
+    def ranking(self, input: str | None = None, metric: str | None = None) -> list[str]:
+        """The factors, most influential first (by ST, or mu* for Morris), for one input and
+        metric (default: the first of each)."""
+        from ema_cli.sensitivity.analyze import ranking
+
+        names = [r.name for r in self.result.inputs]
+        input = input or names[0]
+        metric = metric or self.result.cfg.metrics[0]
+        if input not in names:
+            raise EmaError(f"input: no input {input!r}; this study has {', '.join(names)}")
+        if metric not in self.result.cfg.metrics:
+            raise EmaError(f"metric: {metric!r} was not analysed; expected one of "
+                           f"{', '.join(self.result.cfg.metrics)}")
+        ix = self.indices
+        t = ix[(ix["input"] == input) & (ix["metric"] == metric)]
+        return [str(f) for f in ranking(t, self.result.method)["factor"]]
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """The indices: ``wide`` (indices.csv) or ``long`` (input, metric, transform, factor,
+        quantity, value)."""
+        df = self.indices
+        if form == "wide":
+            return df
+        if form != "long":
+            raise EmaError(f"form must be 'wide' or 'long', got {form!r}")
+        return df.melt(id_vars=["input", "metric", "transform", "factor"], var_name="quantity",
+                       value_name="value").dropna(subset=["value"])
+
+    def plot(self, kind: str = "indices") -> list[Figure]:
+        """The figures ``ema sensitivity`` draws, one per input: ``indices`` (bar charts with
+        confidence intervals) or ``convergence`` (the indices as n doubles)."""
+        from ema_cli.report.sensitivity_report import convergence_figure, indices_figure
+
+        if kind not in ("indices", "convergence"):
+            raise EmaError(f"kind must be indices or convergence, got {kind!r}")
+        draw = indices_figure if kind == "indices" else convergence_figure
+        return [draw(self.result, r.name) for r in self.result.inputs]
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write the folder ``ema sensitivity`` writes -> the folder (new or empty if given)."""
+        from ema_cli.report.sensitivity_report import save_sensitivity
+
+        return save_sensitivity(self.result, folder_arg(folder), self.overrides)
+
+
+def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
+                n: int | None = None, n_jobs: int | None = None, backend: str | None = None,
+                force: bool = False, progress: bool = False,
+                cache_dir: str | Path | None = None) -> Sensitivity:
+    """Run a sensitivity study config (factors, metrics, inputs), as ``ema sensitivity CONFIG
+    --method --n --set ...`` does, without writing an output folder (``.save()`` does).
+
+    method   sobol | morris (default: the config's ``sensitivity.method``)
+    n        Sobol base samples (a power of two) or Morris trajectories (default: the config's)
+    cache_dir  a job cache to use (finished samples are reused by later calls); without it
+             nothing is written to disk
+    n_jobs, backend, force, progress   as ``api.sweep``
+    """
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.sensitivity import SensitivityConfig
+    from ema_cli.report.sensitivity_report import run_sensitivity
+
+    pairs = override_pairs(overrides)
+    cfg = load_config(config, pairs, SensitivityConfig)
+    res = run_sensitivity(cfg, None, method, n, n_jobs=n_jobs, backend=backend, force=force,
+                          progress=progress,
+                          cache_dir=Path(cache_dir) if cache_dir is not None else None,
+                          base_dir=base_dir(config), source=source_name(config),
+                          overrides=pairs, write=False)
+    return Sensitivity(res, pairs)

@@ -1,0 +1,82 @@
+"""`ema sensitivity`: global sensitivity of the metrics to the factors (Morris or Sobol, SALib)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ema_cli.cli.common import (
+    check_number,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
+from ema_cli.errors import EmaError
+
+MAX_WORKERS = 4096  # --n-jobs above this is refused
+TOP_FACTORS = 3  # factors named per input and metric in the closing lines
+
+
+@handle_errors
+def sensitivity_cmd(
+    config: Annotated[Path, typer.Argument(
+        help="YAML sensitivity config (factors, metrics, inputs), e.g. configs/sensitivity.yaml.")],
+    method: Annotated[str | None, typer.Option(
+        "--method", help="morris (elementary effects) | sobol (S1, ST with confidence "
+                         "intervals); default: sensitivity.method.")] = None,
+    n: Annotated[int | None, typer.Option(
+        "--n", help="Sobol base samples (a power of two: n*(D+2) runs per input) or Morris "
+                    "trajectories (n*(D+1) runs); default: sensitivity.n_sobol / n_morris.")
+    ] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Override a config value by dotted path, e.g. factors.0.range=[0.01,2], "
+                      "sensitivity.transform=none; repeatable.")] = None,
+    n_jobs: Annotated[int | None, typer.Option(
+        "--n-jobs", "-j", help="Workers (processes or threads); -1: all cores.")] = None,
+    backend: Annotated[str | None, typer.Option(
+        "--backend", help="auto | loky (processes) | threads (numba prange) | dask.")] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Dask scheduler address for --backend dask.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help=out_help(
+        "an unfinished study of the same inputs there is resumed (finished samples come from "
+        "the job cache)"))] = None,
+    progress: Annotated[bool, typer.Option(
+        "--progress/--no-progress", help="Show a progress bar with ETA (stderr).")] = True,
+) -> None:
+    """Global sensitivity: sample the factors (Morris or Saltelli/Sobol), run every sample as a
+    cached, resumable sweep job, and write indices.csv, convergence.csv, samples.parquet, bar
+    charts with confidence intervals, the convergence figure and summary.md."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.sensitivity import SensitivityConfig
+    from ema_cli.report.sensitivity_report import run_sensitivity
+    from ema_cli.sensitivity.analyze import ranking
+
+    if method is not None and method not in ("morris", "sobol"):
+        raise EmaError(f"--method must be morris or sobol, got {method!r}")
+    check_number(n, "--n", low=1)
+    if n_jobs is not None and n_jobs != -1:
+        check_number(n_jobs, "--n-jobs (-1: all cores)", low=1, high=MAX_WORKERS)
+    if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
+        raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
+    overrides = parse_assignments(set_, "--set")
+    cfg = load_config(config, overrides, SensitivityConfig)
+    res = run_sensitivity(cfg, out, method, n, n_jobs=n_jobs, backend=backend,
+                          scheduler=scheduler, progress=progress, base_dir=config.parent,
+                          source=str(config), overrides=overrides,
+                          log=lambda text: err_console.print(text))
+    key = "ST" if res.method == "sobol" else "mu_star"
+    ix = res.indices
+    for r in res.inputs:
+        for metric in cfg.metrics:
+            t = ranking(ix[(ix["input"] == r.name) & (ix["metric"] == metric)], res.method)
+            top = ", ".join(f"{row['factor']} {row[key]:.3g}" for _, row in
+                            t.head(TOP_FACTORS).iterrows())
+            console.print(f"{r.name} {metric}: {top}")
+    for note in res.notes:
+        err_console.print(f"[yellow]note:[/] {note}")
+    console.print(f"{res.n_runs:,} runs ({res.computed:,} computed, {res.cached:,} cached) in "
+                  f"{res.timings.get('total', 0.0):.1f} s -> {res.folder}")

@@ -1,0 +1,352 @@
+"""A sensitivity study's output folder: indices, convergence, samples, figures, summary, manifest.
+
+Layout of ``results/<name>/<stamp>_<hash>/`` (or ``--out``)::
+
+    config.resolved.yaml     the validated config, every default filled in
+    indices.csv              input, metric, transform, factor, S1, S1_conf, ST, ST_conf,
+                             mu_star, mu_star_conf, sigma, mu (the other method's columns empty)
+    convergence.csv          the same on nested prefixes of the design (column n)
+    samples.parquet          one row per simulation: input, row, key, status, factor values,
+                             metrics (edge units)
+    indices_<input>.png      bar charts with confidence intervals, one panel per metric
+    convergence_<input>.png  the indices vs n (doubling) with confidence bands
+    summary.md               the ranking per input and metric, the figures
+    manifest.json            version, git commit, seed, method, n, runs, timings
+
+:func:`run_sensitivity` runs a study (``sensitivity.run.compute_sensitivity``) and writes the
+folder. The folder follows the one ``--out`` policy (``rundir.prepare_output``): an unfinished
+study of the same inputs (same config, method and n) is resumed in place; its samples come from
+the job cache (``OUT/.cache`` for an ``--out`` outside results/, else ``results/.cache/sweep``),
+so only the unfinished ones run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from matplotlib.figure import Figure
+
+from ema_cli.config.base import check_plain_name
+from ema_cli.config.sensitivity import SensitivityConfig
+from ema_cli.hashing import content_hash
+from ema_cli.report.figures import subplots
+from ema_cli.report.rundir import (
+    check_output,
+    finish_output,
+    manifest,
+    prepare_output,
+    write_csv,
+    write_figure,
+    write_json,
+    write_text,
+)
+from ema_cli.report.sweep_report import default_cache_dir, metric_label
+from ema_cli.sensitivity.analyze import ranking
+from ema_cli.sensitivity.run import SensitivityResult, compute_sensitivity, resolve_method
+
+COMMAND = "sensitivity"
+NEGLIGIBLE_ST = 0.02  # a factor with ST below this is listed as without influence [-]
+CSV_FORMAT = "%.9g"
+
+
+def fingerprint(cfg: SensitivityConfig, method: str, n: int) -> str:
+    """The study's identity for resuming: its config (parallel settings aside), method and n."""
+    return content_hash({"cfg": cfg.model_dump(mode="json", exclude={"parallel"}),
+                         "method": method, "n": n}, 16)
+
+
+def _metric_name(metric: str, transform: str) -> str:
+    label = metric_label(metric)
+    return f"log10 of {label}" if transform == "log10" else label
+
+
+def indices_figure(res: SensitivityResult, input_name: str) -> Figure:
+    """One panel per metric: Sobol S1 and ST (or Morris mu* and sigma) per factor as bars with
+    their confidence intervals, factors sorted by ST (mu*)."""
+    df = res.indices
+    df = df[df["input"] == input_name]
+    metrics = list(res.cfg.metrics)
+    sobol = res.method == "sobol"
+    fig, axes = subplots(1, len(metrics), figsize=(6.5 * len(metrics), 0.45 * res.design.d + 2.5),
+                         squeeze=False)
+    for ax, metric in zip(axes[0], metrics, strict=True):
+        t = df[df["metric"] == metric]
+        t = ranking(t, res.method).iloc[::-1]  # most influential at the top
+        y = np.arange(len(t))
+        h = 0.38
+        if sobol:
+            ax.barh(y + h / 2, t["ST"], h, xerr=t["ST_conf"], color="C0", capsize=3,
+                    label="total ST")
+            ax.barh(y - h / 2, t["S1"], h, xerr=t["S1_conf"], color="C1", capsize=3,
+                    label="first order S1")
+            ax.axvline(NEGLIGIBLE_ST, color="0.5", lw=0.8, ls=":")
+            ax.set_xlabel(f"Sobol index [-] (bars: {res.cfg.sensitivity.conf_level:.0%} CI)")
+        else:
+            ax.barh(y + h / 2, t["mu_star"], h, xerr=t["mu_star_conf"], color="C0", capsize=3,
+                    label="mu* (mean |EE|)")
+            ax.barh(y - h / 2, t["sigma"], h, color="C2", label="sigma (spread of EE)")
+            ax.set_xlabel("elementary effect [metric / factor range] (bars: "
+                          f"{res.cfg.sensitivity.conf_level:.0%} CI)")
+        ax.set_yticks(y, t["factor"])
+        ax.set_title(_metric_name(metric, res.cfg.sensitivity.transform), fontsize=10)
+        ax.grid(True, axis="x", alpha=0.3)
+        ax.legend(fontsize=8, loc="lower right")
+    what = "Sobol indices" if sobol else "Morris elementary effects"
+    fig.suptitle(f"{res.cfg.name}, input {input_name}: {what} ({res.method}, n = {res.n}, "
+                 f"{res.design.n_rows:,} runs)")
+    fig.subplots_adjust(left=0.12, right=0.98, bottom=0.12, top=0.88, wspace=0.35)
+    return fig
+
+
+def convergence_figure(res: SensitivityResult, input_name: str) -> Figure:
+    """One panel per metric: ST (Sobol) or mu* (Morris) of every factor against the design
+    size n, doubling, with its confidence band."""
+    df = res.convergence
+    metrics = list(res.cfg.metrics)
+    fig, axes = subplots(1, len(metrics), figsize=(6.5 * len(metrics), 5.0), squeeze=False)
+    key = "ST" if res.method == "sobol" else "mu_star"
+    for ax, metric in zip(axes[0], metrics, strict=True):
+        if df.empty:
+            continue
+        t = df[(df["input"] == input_name) & (df["metric"] == metric)]
+        for k, f in enumerate(res.design.factors):
+            s = t[t["factor"] == f.name].sort_values("n")
+            if s.empty:
+                continue
+            x, v, c = s["n"].to_numpy(), s[key].to_numpy(), s[f"{key}_conf"].to_numpy()
+            color = f"C{k % 10}"
+            ax.plot(x, v, "o-", color=color, lw=1.3, ms=3, label=f.name)
+            ax.fill_between(x, v - c, v + c, color=color, alpha=0.15)
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("base samples n" if res.method == "sobol" else "trajectories r")
+        ax.set_ylabel("total Sobol index ST [-]" if key == "ST" else "mu* [metric per range]")
+        ax.set_title(_metric_name(metric, res.cfg.sensitivity.transform), fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, ncol=2, loc="best")
+    fig.suptitle(f"{res.cfg.name}, input {input_name}: convergence as n doubles (nested "
+                 "designs, bands: confidence intervals)")
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.11, top=0.88, wspace=0.25)
+    return fig
+
+
+def figures(res: SensitivityResult) -> list[tuple[str, Figure]]:
+    """(file name, Figure) of every figure of the folder."""
+    out = []
+    for r in res.inputs:
+        check_plain_name(r.name, "an input name")
+        out.append((f"indices_{r.name}.png", indices_figure(res, r.name)))
+        if not res.convergence.empty:
+            out.append((f"convergence_{r.name}.png", convergence_figure(res, r.name)))
+    return out
+
+
+def _g(x: Any, digits: int = 3) -> str:
+    if isinstance(x, float | np.floating):
+        return "n/a" if not math.isfinite(x) else f"{x:.{digits}f}"
+    return str(x)
+
+
+def summary_markdown(res: SensitivityResult, names: Sequence[str]) -> str:
+    """summary.md: the study, then per input and metric the factors ranked with their indices,
+    the factors without influence, and the figures."""
+    cfg = res.cfg
+    sobol = res.method == "sobol"
+    lines = [f"# {cfg.name}: global sensitivity ({res.method}, n = {res.n})", ""]
+    if cfg.description:
+        lines += [cfg.description.strip(), ""]
+    lines += [f"{len(res.design.factors)} factors, {res.design.n_rows:,} runs per input "
+              f"({res.computed:,} computed, {res.cached:,} from the job cache); metrics "
+              f"{', '.join(f'`{m}`' for m in cfg.metrics)}"
+              + (" analysed as log10" if cfg.sensitivity.transform == "log10" else "")
+              + f"; confidence level {cfg.sensitivity.conf_level:g}.", ""]
+    lines += ["| factor | varies | range | scale |", "|---|---|---|---|"]
+    for f in cfg.factors:
+        lines.append(f"| {f.label} | {f.target} | {f.range[0]:g} .. {f.range[1]:g} {f.unit} | "
+                     f"{f.scale} |")
+    lines.append("")
+    ix = res.indices
+    for r in res.inputs:
+        lines += [f"## Input {r.name}", ""]
+        for metric in cfg.metrics:
+            t = ix[(ix["input"] == r.name) & (ix["metric"] == metric)]
+            lines += [f"### {_metric_name(metric, cfg.sensitivity.transform)}", ""]
+            if t[["ST" if sobol else "mu_star"]].isna().all().all():
+                lines += ["Not analysed (see the notes).", ""]
+                continue
+            ranked = ranking(t, res.method)
+            if sobol:
+                lines += ["| rank | factor | ST | ± | S1 | ± |", "|---|---|---|---|---|---|"]
+                for _, row in ranked.iterrows():
+                    lines.append(f"| {row['rank']} | {row['factor']} | {_g(row['ST'])} | "
+                                 f"{_g(row['ST_conf'])} | {_g(row['S1'])} | "
+                                 f"{_g(row['S1_conf'])} |")
+                small = ranked[ranked["ST"] < NEGLIGIBLE_ST]["factor"].tolist()
+                lines += ["", f"Without influence (ST < {NEGLIGIBLE_ST}): "
+                              f"{', '.join(small) or 'none'}.", ""]
+            else:
+                lines += ["| rank | factor | mu* | ± | sigma | mu |", "|---|---|---|---|---|---|"]
+                for _, row in ranked.iterrows():
+                    lines.append(f"| {row['rank']} | {row['factor']} | {_g(row['mu_star'], 4)}"
+                                 f" | {_g(row['mu_star_conf'], 4)} | {_g(row['sigma'], 4)} | "
+                                 f"{_g(row['mu'], 4)} |")
+                lines.append("")
+        for n in names:
+            if n.endswith(f"_{r.name}.png"):
+                lines += [f"![{n}]({n})", ""]
+        for note in r.notes:
+            lines += [f"Note: {note}", ""]
+    return "\n".join(lines) + "\n"
+
+
+def write_manifest(res: SensitivityResult, overrides: Sequence[tuple[str, Any]],
+                   names: Sequence[str] = (), status: str | None = None) -> None:
+    """manifest.json: provenance, the study, per-input run counts and timings."""
+    assert res.folder is not None
+    if status is None:
+        status = ("interrupted" if res.interrupted else
+                  "complete" if res.complete else "incomplete")
+    cfg = res.cfg
+    write_json(res.folder / "manifest.json", manifest(
+        COMMAND, name=cfg.name, description=cfg.description, status=status, seed=cfg.seed,
+        method=res.method, n=res.n, n_factors=res.design.d, transform=cfg.sensitivity.transform,
+        runs_per_input=res.design.n_rows, runs_total=res.n_runs,
+        factors=[f.model_dump(mode="json") for f in cfg.factors], metrics=list(cfg.metrics),
+        inputs=[{"name": r.name, "input": r.input.model_dump(mode="json"),
+                 "computed": r.sweep.computed, "cached": r.sweep.cached,
+                 "backend": r.sweep.backend, "workers": r.sweep.workers,
+                 "counts": r.sweep.counts(), "notes": r.notes} for r in res.inputs],
+        computed=res.computed, cached=res.cached, timings_s=res.timings,
+        wall_time_s=res.timings.get("total"), outputs=list(names),
+        overrides=[list(o) for o in overrides]))
+
+
+def write_outputs(res: SensitivityResult, overrides: Sequence[tuple[str, Any]] = ()) -> list[str]:
+    """Write every output of a finished study into ``res.folder`` -> the names written."""
+    folder = res.folder
+    assert folder is not None
+    names = ["config.resolved.yaml", "indices.csv", "convergence.csv", "samples.parquet"]
+    write_csv(folder / "indices.csv", res.indices, float_format=CSV_FORMAT)
+    write_csv(folder / "convergence.csv", res.convergence, float_format=CSV_FORMAT)
+    from ema_cli.files import atomic_write
+
+    samples = res.samples
+    atomic_write(folder / "samples.parquet", lambda p: samples.to_parquet(p, index=False))
+    for name, fig in figures(res):
+        write_figure(folder / name, fig)
+        names.append(name)
+    write_text(folder / "summary.md", summary_markdown(res, names))
+    names += ["summary.md", "manifest.json"]
+    write_manifest(res, overrides, names)
+    return names
+
+
+def prepare_folder(res: SensitivityResult, out: Path | None,
+                   overrides: Sequence[tuple[str, Any]]) -> Path:
+    """Create (or resume) the output folder before any simulation runs."""
+    folder, _ = prepare_output(COMMAND, res.cfg.name, fingerprint(res.cfg, res.method, res.n),
+                               out, resume=True)
+    res.folder = folder
+    write_text(folder / "config.resolved.yaml",
+               yaml.safe_dump(res.cfg.model_dump(mode="json"), sort_keys=False))
+    write_manifest(res, overrides, status="running")
+    return folder
+
+
+def run_sensitivity(
+    cfg: SensitivityConfig,
+    out: Path | None = None,
+    method: str | None = None,
+    n: int | None = None,
+    *,
+    n_jobs: int | None = None,
+    backend: str | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    progress: bool = True,
+    cache_dir: Path | None = None,
+    base_dir: Path | None = None,
+    source: str = "config",
+    overrides: Sequence[tuple[str, Any]] = (),
+    write: bool = True,
+    reuse_finished: bool = False,
+    log: Callable[[str], None] | None = None,
+) -> SensitivityResult:
+    """Run a sensitivity study end to end and write its folder (``write`` False: nothing is
+    written, and no job cache unless ``cache_dir`` is given).
+
+    out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
+               reused only if it holds an unfinished study of the same config, method and n
+               (resumed: finished samples come from the job cache)
+    cache_dir  job cache; None: ``sweep_report.default_cache_dir(out)`` when writing
+
+    reuse_finished  ``out`` belongs to a run being resumed (``ema reproduce``): if it holds the
+               finished study of these very inputs, it is kept as it is (the indices are
+               recomputed from the job cache, nothing is written)
+
+    On Ctrl-C the manifest says ``interrupted`` and the exception propagates; the finished
+    samples are in the job cache for the rerun.
+    """
+    reused = False
+    if write:
+        method, n = resolve_method(cfg, method, n)
+        if cache_dir is None:
+            cache_dir = default_cache_dir(out)
+        fp = fingerprint(cfg, method, n)
+        if reuse_finished and out is not None and finished_study(Path(out), fp):
+            write, reused = False, True
+        else:
+            check_output(out, COMMAND, fp, resume=True)
+
+    def on_start(res: SensitivityResult) -> None:
+        if write:
+            prepare_folder(res, out, overrides)
+
+    def on_finish(res: SensitivityResult, aborted: bool) -> None:
+        if res.folder is None:
+            return
+        if aborted:
+            write_manifest(res, overrides)
+            return
+        write_outputs(res, overrides)
+        if res.complete:
+            finish_output(res.folder)
+
+    res = compute_sensitivity(cfg, method, n, n_jobs=n_jobs, backend=backend,
+                              scheduler=scheduler, force=force, progress=progress,
+                              cache_dir=cache_dir, base_dir=base_dir, source=source,
+                              on_start=on_start, on_finish=on_finish, log=log)
+    if reused:
+        res.folder = Path(out) if out is not None else None
+    return res
+
+
+def finished_study(folder: Path, fp: str) -> bool:
+    """True if ``folder`` holds the finished ``ema sensitivity`` study with fingerprint ``fp``."""
+    import json
+
+    from ema_cli.report.rundir import MARKER
+
+    try:
+        mark = json.loads((folder / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return (isinstance(mark, dict) and mark.get("command") == COMMAND
+            and mark.get("fingerprint") == fp and mark.get("finished") is True)
+
+
+def save_sensitivity(res: SensitivityResult, out: Path | None = None,
+                     overrides: Sequence[tuple[str, Any]] = ()) -> Path:
+    """Write the folder ``ema sensitivity`` writes for a study computed without one (the
+    Python API's ``Sensitivity.save``) -> the folder."""
+    prepare_folder(res, out, overrides)
+    assert res.folder is not None
+    write_outputs(res, overrides)
+    if res.complete:
+        finish_output(res.folder)
+    return res.folder
+
