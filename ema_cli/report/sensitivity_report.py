@@ -84,7 +84,8 @@ def indices_figure(res: SensitivityResult, input_name: str) -> Figure:
                     label="total ST")
             ax.barh(y - h / 2, t["S1"], h, xerr=t["S1_conf"], color="C1", capsize=3,
                     label="first order S1")
-            ax.axvline(NEGLIGIBLE_ST, color="0.5", lw=0.8, ls=":")
+            ax.axvline(NEGLIGIBLE_ST, color="0.5", lw=0.8, ls=":",
+                       label=f"ST = {NEGLIGIBLE_ST} (no influence below)")
             ax.set_xlabel(f"Sobol index [-] (bars: {res.cfg.sensitivity.conf_level:.0%} CI)")
         else:
             ax.barh(y + h / 2, t["mu_star"], h, xerr=t["mu_star_conf"], color="C0", capsize=3,
