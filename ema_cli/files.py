@@ -1,7 +1,8 @@
 """Where results live and how a file is replaced atomically (temporary sibling + rename).
 
-Below every layer (imports nothing of the package): the job cache and the report layer both
-use it. Only ``report/`` writes result files (CSV, PNG, JSON, manifests) through it.
+Below every layer (imports only ``errors``): the job cache and the report layer both use it.
+Only ``report/`` writes result files (CSV, PNG, JSON, manifests) through it. Reading a user's
+CSV with one set of error messages (:func:`read_csv`) lives here too.
 """
 
 from __future__ import annotations
@@ -68,3 +69,22 @@ class AtomicFile:
     def discard(self) -> None:
         """Delete the temporary file (nothing is left behind)."""
         self.tmp.unlink(missing_ok=True)
+
+
+def read_csv(path: str | Path, what: str = "data file", hint: str = "") -> Any:
+    """Read the CSV ``path`` as a DataFrame, or raise EmaError naming ``what`` and the file
+    (it does not exist, is not a file (``hint`` says what it should be), or pandas cannot
+    parse it)."""
+    import pandas as pd
+
+    from ema_cli.errors import EmaError
+
+    p = Path(path)
+    if not p.exists():
+        raise EmaError(f"{what} '{p}' does not exist")
+    if not p.is_file():
+        raise EmaError(f"{what} '{p}' is not a file{hint}")
+    try:
+        return pd.read_csv(p)
+    except Exception as exc:  # pandas raises many types for malformed files
+        raise EmaError(f"{what} '{p}' is not a readable CSV: {exc}") from None

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ema_cli.errors import EmaError
+from ema_cli.files import read_csv
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -148,14 +149,7 @@ def load_csv(path: str | Path, columns: Mapping[str, str] | None = None) -> Iden
             raise EmaError(f"--columns: unknown column '{canon}'; the mappable names are "
                            f"{', '.join(CSV_COLUMNS)}")
         mapping[canon] = col
-    if not p.exists():
-        raise EmaError(f"data file '{p}' does not exist")
-    if not p.is_file():
-        raise EmaError(f"data file '{p}' is not a file")
-    try:
-        df = pd.read_csv(p)
-    except Exception as exc:  # pandas raises many types for malformed files
-        raise EmaError(f"data file '{p}' is not a readable CSV: {exc}") from None
+    df = read_csv(p)
     missing = [f"{col}" + (f" (for {canon})" if col != canon else "")
                for canon, col in mapping.items() if col not in df.columns]
     if missing:

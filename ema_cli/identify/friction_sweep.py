@@ -30,6 +30,7 @@ import numpy as np
 
 from ema_cli._numba import njit
 from ema_cli.errors import EmaError
+from ema_cli.files import read_csv
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
 from ema_cli.model.lugre import steady_friction_nb, stribeck_nb
 from ema_cli.units import RPM
@@ -139,14 +140,7 @@ def read_table(path: str | Path, required: tuple[str, ...],
     import pandas as pd
 
     p = Path(path)
-    if not p.exists():
-        raise EmaError(f"data file '{p}' does not exist")
-    if not p.is_file():
-        raise EmaError(f"data file '{p}' is not a file")
-    try:
-        df = pd.read_csv(p)
-    except Exception as exc:  # pandas raises many types for malformed files
-        raise EmaError(f"data file '{p}' is not a readable CSV: {exc}") from None
+    df = read_csv(p)
     missing = [c for c in required if c not in df.columns]
     if missing:
         raise EmaError(f"data file '{p}' lacks column(s) {', '.join(missing)}; expected "

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ema_cli.errors import EmaError
+from ema_cli.files import read_csv
 from ema_cli.units import DEG
 
 KINDS = ("step", "ramp", "sine", "chirp", "csv")
@@ -88,14 +89,7 @@ def load_profile(path: str | Path, value: str = "theta_ref_deg",
     import pandas as pd
 
     p = Path(path)
-    if not p.exists():
-        raise EmaError(f"profile '{p}' does not exist")
-    if not p.is_file():
-        raise EmaError(f"profile '{p}' is not a file (a CSV with columns t_s, {value})")
-    try:
-        df = pd.read_csv(p)
-    except Exception as exc:  # pandas raises many types for malformed files
-        raise EmaError(f"profile '{p}' is not a readable CSV: {exc}") from None
+    df = read_csv(p, "profile", f" (a CSV with columns t_s, {value})")
     missing = [c for c in ("t_s", value) if c not in df.columns]
     if missing:
         raise EmaError(f"profile '{p}' lacks column(s) {missing}; expected t_s, {value}")
