@@ -32,7 +32,7 @@ from ema_cli.identify.closed_loop import (
     check_free,
     load_log,
 )
-from ema_cli.identify.ga import GAHistory, preset, run_ga
+from ema_cli.optim.ga import GAHistory, preset, run_ga
 from ema_cli.identify.log_settings import ClosedLoopSettings
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
 from ema_cli.model.params import BY_NAME
