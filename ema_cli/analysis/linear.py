@@ -24,7 +24,9 @@ States ``x = [theta_m, w_m, i, theta_L, w_L, xI]`` (+ ``xn1, xn2`` with a notch)
     theta_fb = (1 - b) theta_L + b theta_m / m     (b = fb_motor: 0 load sensor, 1 motor)
 
 Loops are broken at their feedback (the measured position theta_fb for the position loop, the
-measured motor speed for the speed loop) with the other loop closed; the loop transfer is
+measured motor speed at the speed PI for the speed loop) with the other loop closed; the
+viscous friction compensation keeps reading the motor speed (it belongs to the compensated
+motor, around which the speed loop is closed). The loop transfer is
 ``L(s) = -(return at the break)/(injection)``, so the closed loop is stable when the Nyquist
 curve of ``L`` obeys the usual criterion and ``1 + L`` is the return difference.
 """
@@ -43,6 +45,10 @@ STATE_NAMES = ("theta_m", "w_m", "i", "theta_L", "w_L", "xI")
 INPUT_NAMES = ("theta_ref", "torque_disturbance")
 OUTPUT_NAMES = ("theta_L", "w_L", "theta_m", "w_m", "i", "u_dem")
 LOOPS = ("position", "speed")
+LINEAR_PARAMS = ("m", "kL", "c", "Jm", "JL", "bm", "sigma2", "friction", "bL", "Kt", "Ke", "R",
+                 "L", "k_h", "Kpp", "Kps", "Kis", "fb_motor", "ff_sigma2", "notch_hz",
+                 "notch_depth", "notch_zeta")
+"""The parameters the linear model reads (two parameter sets equal on these have one model)."""
 MODAL_COND_MAX = 1.0e8  # frequency responses in modal form below this condition number of the
 # eigenvector matrix (relative error ~ cond * 1e-16), by a direct solve above it
 
@@ -167,12 +173,13 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
     else:
         ew_x[3] = -m * Kpp * (1.0 - b)
         ew_x[0] = -Kpp * b
+    # the friction compensator's measured speed stays closed when the speed loop is broken: the
+    # speed loop is the PI's feedback, around the compensated motor
+    ws_x[1] = 1.0
     if broken == "speed":
-        ew_v -= 1.0
-        ws_v = 1.0  # the measured motor speed is the injection
+        ew_v -= 1.0  # the PI's measured motor speed is the injection
     else:
         ew_x[1] = -1.0
-        ws_x[1] = 1.0
     # u_pre = Kps e_w + Kis xI + k_ff w_meas (the viscous friction compensation, R/Kt*ff_sigma2,
     # on the measured motor speed);
     # u = u_pre + c_n xn2 (the notch; xn1' = xn2, xn2' = -w^2 xn1 - 2 zeta w xn2 + u_pre)
@@ -215,6 +222,12 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
     else:
         Cr[0, names.index("w_m")] = 1.0
     return StateSpace(Acl, col_v[:, None], Cr, np.zeros((1, 1)), names, ("v",), ("return",))
+
+
+def closed_loop_stable(params: Mapping[str, float]) -> bool:
+    """Whether the closed linear loop (both loops closed) is asymptotically stable: every
+    eigenvalue in the open left half-plane."""
+    return bool(np.max(np.linalg.eigvals(linear_model(params).A).real) < 0.0)
 
 
 @dataclass(frozen=True)

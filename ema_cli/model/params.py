@@ -110,6 +110,11 @@ PARAMS: tuple[Param, ...] = (
     Param("q_speed", "rad/s", 0.0, "speed sensor resolution (0: none)"),
 )
 FLAGS = ("friction", "locked")
+CONTROLLER_PARAMS = ("Kpp", "Kps", "Kis", "fb_motor", "dzi_v", "dzi_band", "ff_fc", "ff_fs",
+                     "ff_vs", "ff_sigma2", "ff_sigma0", "ff_sigma1", "ff_band", "notch_hz",
+                     "notch_depth", "notch_zeta")
+"""The continuous parameters of the controller and its compensators (what `ema tune` may
+free); the sample time Ts is not among them (it must stay a multiple of the step)."""
 """0/1 parameters: accept off/on, false/true, 0/1."""
 
 INDEX: dict[str, int] = {p.name: i for i, p in enumerate(PARAMS)}
