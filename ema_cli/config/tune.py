@@ -61,6 +61,7 @@ DEFAULT_CONSTRAINTS: dict[str, dict[str, Any]] = {
     "phase_margin": {"min": 45.0, "unit": "deg"},
 }
 COSTS = ("itae", "iae", "ise")
+FRACTIONS = ("fb_motor", "notch_depth")  # controller parameters that lie in [0, 1]
 MAX_SCENARIOS = 20  # scenarios in one config, at most [-]
 MAX_VARIABLES = 16  # free variables, at most (every controller parameter) [-]
 MAX_DURATION_S = 30.0  # simulated time of one scenario run, at most [s]
@@ -231,6 +232,8 @@ class TuneConfig(Strict):
                     check_value(name, bound)
                 except Exception as exc:  # noqa: BLE001 - check_value raises EmaError
                     raise _at(f"{name}.bounds", f"{k} bound: {exc}") from None
+                if name in FRACTIONS and not 0.0 <= bound <= 1.0:
+                    raise _at(f"{name}.bounds", f"{k} bound {bound:g}: {name} lies in [0, 1]")
         return v
 
     @field_validator("constraints", mode="before")
