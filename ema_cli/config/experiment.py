@@ -235,7 +235,8 @@ class ExperimentConfig(Strict):
             earlier = [u.id for u in self.thresholds[:k]]
             if t.compare_to is not None and t.compare_to not in earlier:
                 raise ValueError(f"thresholds.{k} ({t.id}): compare_to '{t.compare_to}' is not "
-                                 f"an earlier threshold id; earlier: {', '.join(earlier) or 'none'}")
+                                 "an earlier threshold id; earlier: "
+                                 f"{', '.join(earlier) or 'none'}")
         _unique([c.id for c in self.claims], "claim id")
         studies = {s.id for s in self.studies}
         known = ", ".join(sorted(studies)) or "none"

@@ -27,11 +27,11 @@ from ema_cli.analysis.reproduce import (
 )
 from ema_cli.config.base import check_plain_name
 from ema_cli.config.experiment import ExperimentConfig, StudySpec
+from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
 from ema_cli.report.identify_figures import identification_summary
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
-from ema_cli.errors import EmaError
 from ema_cli.report.sensitivity_report import run_sensitivity
 from ema_cli.report.sweep_report import default_cache_dir, run_sweep
 from ema_cli.report.threshold_figures import threshold_figure
