@@ -132,10 +132,22 @@ class Scenario(Strict):
         default_factory=dict, description="constraints of this scenario only (replacing the "
                                           "global ones of the same name; off removes one)")
 
+    @field_validator("constraints", mode="before")
+    @classmethod
+    def _off(cls, v: Any) -> Any:
+        return _off_words(v)
+
     @field_validator("constraints")
     @classmethod
     def _known(cls, v: dict[str, Any]) -> dict[str, Any]:
         return _check_constraints(v)
+
+
+def _off_words(v: Any) -> Any:
+    """YAML reads an unquoted ``off`` as false: a constraint given as false is ``off``."""
+    if isinstance(v, dict):
+        return {k: ("off" if x is False else x) for k, x in v.items()}
+    return v
 
 
 def _check_constraints(v: dict[str, Any]) -> dict[str, Any]:
@@ -240,7 +252,7 @@ class TuneConfig(Strict):
     @classmethod
     def _with_defaults(cls, v: Any) -> Any:
         if isinstance(v, dict):  # the defaults stay unless named (off removes one)
-            return {**DEFAULT_CONSTRAINTS, **v}
+            return {**DEFAULT_CONSTRAINTS, **_off_words(v)}
         return v
 
     @field_validator("constraints")
