@@ -203,6 +203,10 @@ class OptimiserConfig(Strict):
     runs: PositiveInt = Field(1, le=MAX_RUNS, description="independent runs (seeds seed, "
                                                           "seed+1, ...); the best is kept")
     seed: Seed = Field(0, description="seed of the first run")
+    polish: float = Field(
+        0.25, ge=0.0, le=0.9, description="fraction of the budget for a compass (pattern) "
+                                           "search from the best point after the global "
+                                           "optimiser (0: none)")
     patience: NonNegInt = Field(
         0, description="GA: stop after this many generations without improvement (0: never)")
 

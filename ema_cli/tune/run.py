@@ -19,6 +19,7 @@ import numpy as np
 from ema_cli.config.tune import TuneConfig
 from ema_cli.optim.de import DEOptions, run_de
 from ema_cli.optim.ga import GAResult, preset, run_ga
+from ema_cli.optim.polish import polished
 from ema_cli.tune.problem import Evaluation, Scenario, TuneProblem
 
 GA_ELITES = 2  # elites of the tuning GA [individuals]
@@ -76,26 +77,42 @@ def generations_for(budget: int, pop: int, elites: int = GA_ELITES) -> int:
     return 1 + max((budget - pop) // (pop - elites), 0)
 
 
-def evaluations_for(method: str, budget: int, pop: int, n_var: int) -> int:
-    """Candidate evaluations one run of ``method`` actually spends for ``budget`` (at most the
-    budget: whole generations only)."""
+def evaluations_for(method: str, budget: int, pop: int, n_var: int, polish: float = 0.0) -> int:
+    """Candidate evaluations one run of ``method`` spends at most for ``budget`` (whole
+    generations, then the polish's whole iterations of 2*n_var)."""
+    glob, _ = split_budget(budget, polish)
     if method == "de":
-        members, gens = DEOptions(pop=pop, budget=budget).sizes(n_var)
-        return members * (gens + 1)
-    return pop + (generations_for(budget, pop) - 1) * (pop - GA_ELITES)
+        members, gens = DEOptions(pop=pop, budget=glob).sizes(n_var)
+        used = members * (gens + 1)
+    else:
+        used = pop + (generations_for(glob, pop) - 1) * (pop - GA_ELITES)
+    if polish <= 0:
+        return used
+    return used + (budget - used) // (2 * n_var) * (2 * n_var)
+
+
+def split_budget(budget: int, polish: float) -> tuple[int, int]:
+    """(global optimiser's share, compass polish's share) of ``budget`` evaluations."""
+    local = int(round(budget * polish))
+    return budget - local, local
 
 
 def one_run(problem: TuneProblem, method: str, budget: int, pop: int, seed: int,
-            patience: int = 0) -> GAResult:
-    """One optimiser run on ``problem`` from ``seed``."""
+            patience: int = 0, polish: float = 0.0) -> GAResult:
+    """One optimiser run on ``problem`` from ``seed``: the global optimiser on its share of
+    ``budget``, then the compass polish (``optim.polish``) on the rest (``polish`` fraction)."""
     rng = np.random.default_rng(seed)
+    glob, local = split_budget(budget, polish)
     if method == "ga":
-        opts = preset("improved", pop=pop, generations=generations_for(budget, pop),
+        opts = preset("improved", pop=pop, generations=generations_for(glob, pop),
                       elitism=GA_ELITES, pm=GA_PM, patience=patience)
-        return run_ga(problem, opts, rng)
-    if method == "de":
-        return run_de(problem, DEOptions(pop=pop, budget=budget), rng)
-    raise ValueError(f"method must be 'ga' or 'de', got {method!r}")
+        res = run_ga(problem, opts, rng)
+    elif method == "de":
+        res = run_de(problem, DEOptions(pop=pop, budget=glob), rng)
+    else:
+        raise ValueError(f"method must be 'ga' or 'de', got {method!r}")
+    used = res.evaluations
+    return polished(problem, res, budget - used) if local > 0 else res
 
 
 def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = None,
@@ -118,7 +135,7 @@ def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = 
         raise EmaError(f"--budget: {budget} evaluations cannot cover two generations of the "
                        f"population ({opt.pop}); give at least {2 * opt.pop}")
     problem = TuneProblem(cfg, scenarios)
-    per_run = evaluations_for(method, budget, opt.pop, len(problem.variables))
+    per_run = evaluations_for(method, budget, opt.pop, len(problem.variables), opt.polish)
     total = n_runs * per_run
     records: list[RunRecord] = []
     for k in range(n_runs):
@@ -127,7 +144,7 @@ def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = 
             problem.progress = (lambda n, d=done, k=k: progress(k, min(d + n, total), total))
             problem.n_evaluations = 0
         seed = opt.seed + k
-        res = one_run(problem, method, budget, opt.pop, seed, opt.patience)
+        res = one_run(problem, method, budget, opt.pop, seed, opt.patience, opt.polish)
         x = problem.values(res.x[None])[0]
         ev = problem.score(x[None])
         records.append(RunRecord(seed, res, x, float(ev.score[0]), float(ev.cost[0]),
