@@ -33,12 +33,13 @@ test: $(TSTAMP)  ## lint, then the whole test suite
 	$(BIN)/ruff check ema_cli tests
 	$(BIN)/python -m pytest
 
-bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up, sensitivity
+bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up, sensitivity, tuning
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
 	$(BIN)/python experiments/bench_identify_logs.py
 	$(BIN)/python experiments/bench_sensitivity.py
+	$(BIN)/python experiments/bench_tune.py
 
 lint: $(TSTAMP)  ## ruff
 	$(BIN)/ruff check ema_cli tests experiments

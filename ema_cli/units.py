@@ -30,7 +30,7 @@ def rad_s_to_rpm(x):
 
 # Units a user may write at the edges (acceptance limits): name -> (dimension, SI per unit).
 # SI dimensions: time s, angle rad, frequency Hz, rate rad/s, stiffness N*m/rad, current A,
-# torque N*m; percent and dB are their own.
+# torque N*m, voltage V; percent and dB are their own.
 UNITS: dict[str, tuple[str, float]] = {
     "s": ("time", 1.0), "ms": ("time", 1e-3),
     "rad": ("angle", 1.0), "mrad": ("angle", 1e-3), "deg": ("angle", DEG),
@@ -39,12 +39,12 @@ UNITS: dict[str, tuple[str, float]] = {
     "rad/s": ("rate", 1.0), "deg/s": ("rate", DEG), "rpm": ("rate", RPM),
     "N*m/rad": ("stiffness", 1.0), "N*m/deg": ("stiffness", 1.0 / DEG),
     "kN*m/rad": ("stiffness", 1e3),
-    "A": ("current", 1.0), "N*m": ("torque", 1.0),
+    "A": ("current", 1.0), "N*m": ("torque", 1.0), "V": ("voltage", 1.0),
     "%": ("percent", 1.0), "dB": ("decibel", 1.0),
 }
 SI_UNIT = {"time": "s", "angle": "rad", "frequency": "Hz", "rate": "rad/s",
-           "stiffness": "N*m/rad", "current": "A", "torque": "N*m", "percent": "%",
-           "decibel": "dB"}
+           "stiffness": "N*m/rad", "current": "A", "torque": "N*m", "voltage": "V",
+           "percent": "%", "decibel": "dB"}
 """The SI (internal) unit of each dimension."""
 
 

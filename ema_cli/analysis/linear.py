@@ -24,7 +24,9 @@ States ``x = [theta_m, w_m, i, theta_L, w_L, xI]`` (+ ``xn1, xn2`` with a notch)
     theta_fb = (1 - b) theta_L + b theta_m / m     (b = fb_motor: 0 load sensor, 1 motor)
 
 Loops are broken at their feedback (the measured position theta_fb for the position loop, the
-measured motor speed for the speed loop) with the other loop closed; the loop transfer is
+measured motor speed at the speed PI for the speed loop) with the other loop closed; the
+viscous friction compensation keeps reading the motor speed (it belongs to the compensated
+motor, around which the speed loop is closed). The loop transfer is
 ``L(s) = -(return at the break)/(injection)``, so the closed loop is stable when the Nyquist
 curve of ``L`` obeys the usual criterion and ``1 + L`` is the return difference.
 """
@@ -32,7 +34,7 @@ curve of ``L`` obeys the usual criterion and ``1 + L`` is the return difference.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +45,12 @@ STATE_NAMES = ("theta_m", "w_m", "i", "theta_L", "w_L", "xI")
 INPUT_NAMES = ("theta_ref", "torque_disturbance")
 OUTPUT_NAMES = ("theta_L", "w_L", "theta_m", "w_m", "i", "u_dem")
 LOOPS = ("position", "speed")
+LINEAR_PARAMS = ("m", "kL", "c", "Jm", "JL", "bm", "sigma2", "friction", "bL", "Kt", "Ke", "R",
+                 "L", "k_h", "Kpp", "Kps", "Kis", "fb_motor", "ff_sigma2", "notch_hz",
+                 "notch_depth", "notch_zeta")
+"""The parameters the linear model reads (two parameter sets equal on these have one model)."""
+MODAL_COND_MAX = 1.0e8  # frequency responses in modal form below this condition number of the
+# eigenvector matrix (relative error ~ cond * 1e-16), by a direct solve above it
 
 
 @dataclass(frozen=True)
@@ -60,16 +68,35 @@ class StateSpace:
     def response(self, f_hz: np.ndarray, inp: str = "theta_ref",
                  out: str = "theta_L") -> np.ndarray:
         """The complex frequency response ``Y(j w)/U(j w)`` at ``f_hz`` [Hz]."""
+        return self.evaluator(inp, out)(f_hz)
+
+    def evaluator(self, inp: str = "theta_ref",
+                  out: str = "theta_L") -> Callable[[np.ndarray], np.ndarray]:
+        """A function ``f_hz -> Y(j w)/U(j w)`` (the decomposition done once, for repeated
+        evaluation): the modal form ``sum_k (C V)_k (V^-1 B)_k / (s - lambda_k) + D`` when the
+        eigenvectors are well conditioned, else a direct solve per frequency."""
         j = self.inputs.index(inp)
         k = self.outputs.index(out)
         n = self.A.shape[0]
-        eye = np.eye(n)
-        out_h = np.empty(len(np.atleast_1d(f_hz)), dtype=complex)
-        for q, f in enumerate(np.atleast_1d(f_hz)):
-            s = 2j * math.pi * f
-            x = np.linalg.solve(s * eye - self.A, self.B[:, j])
-            out_h[q] = self.C[k] @ x + self.D[k, j]
-        return out_h
+        b = self.B[:, j].astype(complex)
+        c = self.C[k]
+        d = self.D[k, j]
+        lam, V = np.linalg.eig(self.A)
+        if np.linalg.cond(V) < MODAL_COND_MAX:
+            res = (c @ V) * np.linalg.solve(V, b)
+
+            def modal(f_hz: np.ndarray) -> np.ndarray:
+                s = 2j * math.pi * np.atleast_1d(np.asarray(f_hz, dtype=np.float64))
+                return (res[None, :] / (s[:, None] - lam[None, :])).sum(axis=1) + d
+            return modal
+        A = self.A
+
+        def direct(f_hz: np.ndarray) -> np.ndarray:
+            s = 2j * math.pi * np.atleast_1d(np.asarray(f_hz, dtype=np.float64))
+            M = s[:, None, None] * np.eye(n)[None] - A[None]
+            x = np.linalg.solve(M, np.broadcast_to(b, (s.shape[0], n))[..., None])[..., 0]
+            return x @ c + d
+        return direct
 
 
 def _coefficients(p: Mapping[str, float]) -> dict[str, float]:
@@ -146,12 +173,13 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
     else:
         ew_x[3] = -m * Kpp * (1.0 - b)
         ew_x[0] = -Kpp * b
+    # the friction compensator's measured speed stays closed when the speed loop is broken: the
+    # speed loop is the PI's feedback, around the compensated motor
+    ws_x[1] = 1.0
     if broken == "speed":
-        ew_v -= 1.0
-        ws_v = 1.0  # the measured motor speed is the injection
+        ew_v -= 1.0  # the PI's measured motor speed is the injection
     else:
         ew_x[1] = -1.0
-        ws_x[1] = 1.0
     # u_pre = Kps e_w + Kis xI + k_ff w_meas (the viscous friction compensation, R/Kt*ff_sigma2,
     # on the measured motor speed);
     # u = u_pre + c_n xn2 (the notch; xn1' = xn2, xn2' = -w^2 xn1 - 2 zeta w xn2 + u_pre)
@@ -196,6 +224,12 @@ def linear_model(params: Mapping[str, float], broken: str | None = None) -> Stat
     return StateSpace(Acl, col_v[:, None], Cr, np.zeros((1, 1)), names, ("v",), ("return",))
 
 
+def closed_loop_stable(params: Mapping[str, float]) -> bool:
+    """Whether the closed linear loop (both loops closed) is asymptotically stable: every
+    eigenvalue in the open left half-plane."""
+    return bool(np.max(np.linalg.eigvals(linear_model(params).A).real) < 0.0)
+
+
 @dataclass(frozen=True)
 class Margins:
     """Stability margins of one loop: gain margin [dB] at the phase crossover [Hz], phase
@@ -218,18 +252,14 @@ def loop_transfer(params: Mapping[str, float], loop: str, f_hz: np.ndarray) -> n
 
 
 def _refine(fun, a: float, b: float) -> float:
-    """A root of ``fun`` in [a, b] (a sign change), by bisection on log f to 1e-12."""
-    fa = fun(a)
-    for _ in range(200):
-        mid = math.sqrt(a * b)
-        fm = fun(mid)
-        if (fm > 0) == (fa > 0):
-            a, fa = mid, fm
-        else:
-            b = mid
-        if b / a - 1 < 1e-13:
-            break
-    return math.sqrt(a * b)
+    """A root of ``fun`` in [a, b] (a sign change), by Brent's method on log f to 1e-13."""
+    from scipy.optimize import brentq
+
+    la, lb = math.log(a), math.log(b)
+    fa, fb = fun(a), fun(b)
+    if fa == 0.0 or fb == 0.0:
+        return a if fa == 0.0 else b
+    return math.exp(brentq(lambda u: fun(math.exp(u)), la, lb, xtol=1e-15, rtol=1e-14))
 
 
 def margins(params: Mapping[str, float], loop: str, f_min: float = 1e-3, f_max: float = 1e5,
@@ -237,12 +267,13 @@ def margins(params: Mapping[str, float], loop: str, f_min: float = 1e-3, f_max: 
     """Gain and phase margins of ``loop`` ("position" or "speed"), from a dense log grid of
     ``L(j w)`` refined by bisection at each crossing; the smallest margins are reported when
     there are several crossings."""
+    transfer = linear_model(params, loop).evaluator("v", "return")
     f = np.geomspace(f_min, f_max, n)
-    Lf = loop_transfer(params, loop, f)
+    Lf = -transfer(f)
     mag = np.abs(Lf)
 
     def one(x: float) -> complex:
-        return complex(loop_transfer(params, loop, np.array([x]))[0])
+        return complex(-transfer(np.array([x]))[0])
 
     pm, f_pm = math.inf, math.nan
     for k in np.flatnonzero(np.diff(np.sign(mag - 1.0)) != 0):

@@ -42,6 +42,8 @@ class ThresholdOutcome:
     value: float
     unit: str
     input_desc: str
+    tuned: dict[str, float] | None = None  # the tuned controller it ran with (SI)
+    tuning: dict[str, Any] | None = None  # cost, constraints met, evaluations of that tuning
 
 
 @dataclass
@@ -159,12 +161,15 @@ def compute_sensitivity_ranking(rep: Reproduction) -> pd.DataFrame:
     return out
 
 
-def compute_threshold(path: Path, spec: ThresholdSpec) -> ThresholdOutcome:
-    """Run one threshold search of the batch."""
+def compute_threshold(path: Path, spec: ThresholdSpec,
+                      plant: dict[str, float] | None = None) -> ThresholdOutcome:
+    """Run one threshold search of the batch; ``plant``: SI overrides on top of its config
+    (e.g. a tuned controller)."""
     cfg, cpath = study_config(path, spec.config)
     signal = input_signal(cfg.input, cpath.parent, cfg.load)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != spec.vary}
-    ev = simulation_evaluator(spec.vary, cfg.plant_overrides(), nls, signal,
+    ev = simulation_evaluator(spec.vary, {**cfg.plant_overrides(), **(plant or {})}, nls,
+                              signal,
                               cfg.simulation.duration_s, cfg.simulation.dt_s,
                               cfg.friction_reading)
     criteria = [Criterion.parse(r) for r in spec.require]
@@ -182,7 +187,8 @@ def compute_threshold(path: Path, spec: ThresholdSpec) -> ThresholdOutcome:
     value, unit = res.threshold, spec.unit or lookup(spec.vary).unit
     if spec.percent_of_input:
         value, unit = 100 * res.threshold / abs(cfg.input.amplitude_deg), "% of the input"
-    return ThresholdOutcome(spec, res, criteria, value, unit, signal.describe())
+    return ThresholdOutcome(spec, res, criteria, value, unit, signal.describe(),
+                            dict(plant) if plant else None)
 
 
 def compute_ranking(rep: Reproduction) -> pd.DataFrame:
@@ -209,14 +215,26 @@ def compute_ranking(rep: Reproduction) -> pd.DataFrame:
     return out
 
 
-def compute_thresholds(rep: Reproduction, log: Any = print) -> None:
-    """Run every threshold search of the batch into ``rep`` (and its scalars)."""
+def compute_thresholds(rep: Reproduction, log: Any = print,
+                       tuned: dict[str, tuple[dict[str, float], dict[str, Any]]] | None = None
+                       ) -> None:
+    """Run every threshold search of the batch into ``rep`` (and its scalars); ``tuned``:
+    threshold id -> (tuned controller values, tuning summary) for those with ``tuning``."""
     t0 = time.perf_counter()
     for t in rep.exp.thresholds:
         log(f"threshold {t.id}: {t.vary} over {t.range[0]:g}..{t.range[1]:g}")
-        outcome = compute_threshold(rep.path, t)
+        values, summary = (tuned or {}).get(t.id, (None, None))
+        if t.tuning is not None and values is None:
+            raise EmaError(f"{rep.path}: threshold '{t.id}' needs its tuning ({t.tuning}) run "
+                           "first")
+        outcome = compute_threshold(rep.path, t, values)
+        outcome.tuning = summary
         rep.thresholds.append(outcome)
         rep.scalars[t.id] = outcome.value
+        if summary is not None:
+            rep.scalars[f"{t.id}.tuning_cost"] = float(summary["cost"])
+        if t.compare_to is not None:
+            rep.scalars[f"{t.id}_ratio"] = outcome.value / rep.scalars[t.compare_to]
     rep.timings["thresholds"] = time.perf_counter() - t0
 
 

@@ -33,11 +33,13 @@ from ema_cli.api.sensitivity import Sensitivity, sensitivity
 from ema_cli.api.simulation import Simulation, simulate
 from ema_cli.api.study import Sweep, sweep
 from ema_cli.api.threshold import Threshold, threshold
+from ema_cli.api.tune import TuneResult, tune
 from ema_cli.errors import EmaError
 
 __all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
            "FrictionSweepIdentification", "Identification", "LoopMargins", "Sensitivity",
-           "Simulation", "Sweep", "SyntheticData", "Threshold", "acceptance", "freqresp",
+           "Simulation", "Sweep", "SyntheticData", "Threshold", "TuneResult", "acceptance",
+           "freqresp",
            "identify", "identify_closed_loop", "identify_friction_sweep",
            "make_identification_data", "margins", "sensitivity", "simulate", "sweep",
-           "threshold"]
+           "threshold", "tune"]

@@ -21,6 +21,7 @@ from ema_cli.cli import (
     simulate,
     sweep,
     threshold,
+    tune,
 )
 
 app = typer.Typer(
@@ -56,6 +57,7 @@ COMMANDS = (
     ("margins", margins.margins_cmd),
     ("freqresp", freqresp.freqresp_cmd),
     ("acceptance", acceptance.acceptance_cmd),
+    ("tune", tune.tune_cmd),
     ("sensitivity", sensitivity.sensitivity_cmd),
     ("identify", identify.identify_cmd),
     ("reproduce", reproduce.reproduce_cmd),
@@ -69,7 +71,7 @@ for _name, _fn in COMMANDS:
 
 
 FAST_EXIT = frozenset({"simulate", "validate", "show", "threshold", "margins", "freqresp",
-                       "acceptance", "locations", "params"})
+                       "acceptance", "tune", "locations", "params"})
 """Commands that start no worker processes: once they have finished (every file written and
 closed, output flushed) the process ends at once. The interpreter's own teardown of numba,
 LLVM and matplotlib takes ~0.45 s and does nothing these commands need; commands that may start

@@ -132,7 +132,7 @@ def sweep_cmd(
                        "are cached", 1)
 
 
-KINDS = ("auto", "study", "experiment", "identify", "acceptance", "sensitivity")
+KINDS = ("auto", "study", "experiment", "identify", "acceptance", "sensitivity", "tune")
 """What `ema validate` can check: a study config, an experiment batch, identification settings,
 an acceptance spec, a sensitivity study."""
 
@@ -142,6 +142,8 @@ def detect_kind(config: Path) -> str:
     from ema_cli.config.loader import read_yaml
 
     keys = set(read_yaml(config))
+    if keys & {"scenarios", "variables", "optimiser"}:
+        return "tune"
     if keys & {"tests", "actuator"}:
         return "acceptance"
     if keys & {"studies", "claims", "thresholds", "ranking", "identification", "paper"}:
@@ -161,8 +163,8 @@ def validate_cmd(
     kind: Annotated[str, typer.Option(
         "--kind", help="What CONFIG is: study (`ema sweep`/`simulate`), experiment "
                        "(`ema reproduce`), identify (`ema identify`), acceptance (`ema "
-                       "acceptance`), sensitivity (`ema sensitivity`) or auto (from its "
-                       "keys).")
+                       "acceptance`), sensitivity (`ema sensitivity`), tune (`ema tune`) or "
+                       "auto (from its keys).")
     ] = "auto",
 ) -> None:
     """Check CONFIG against its schema (fast: nothing is simulated); for a study, count its
@@ -188,6 +190,17 @@ def validate_cmd(
         n_limits = sum(len(t.limits) for t in spec.tests.values())
         console.print(f"{config}: valid acceptance spec; {len(spec.tests)} tests, {n_limits} "
                       "limits")
+        return
+    if kind == "tune":
+        from ema_cli.config.loader import load_config
+        from ema_cli.config.tune import TuneConfig
+
+        t = load_config(config, overrides, TuneConfig)
+        n_cons = len(t.constraints)
+        console.print(f"{config}: valid tuning config; {len(t.scenarios)} scenarios, "
+                      f"{len(t.variables)} variables ({', '.join(t.variables)}), {n_cons} "
+                      f"constraints, {t.optimiser.method} budget {t.optimiser.budget} x "
+                      f"{t.optimiser.runs} run(s)")
         return
     if kind == "identify":
         from ema_cli.config.loader import load_config

@@ -29,7 +29,7 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from ema_cli.config.base import FiniteFloat, PlainName, PositiveFloat, PositiveInt, Strict
-from ema_cli.config.run import KEY_MARK
+from ema_cli.config.run import KEY_MARK, Scalar
 from ema_cli.units import SI_UNIT, UNITS, units_of
 
 METRICS: dict[str, dict[str, str]] = {
@@ -258,8 +258,9 @@ class ActuatorSpec(Strict):
 
     config: str | None = Field(None, description="run config, relative to the spec (null: "
                                                  "the bundled defaults)")
-    plant: dict[str, FiniteFloat] = Field(default_factory=dict,
-                                          description="SI parameter overrides (`ema params`)")
+    plant: dict[str, Scalar] = Field(default_factory=dict,
+                                     description="SI parameter overrides (`ema params`; "
+                                                 "off removes a saturation)")
     nonlinearities: dict[str, Any] = Field(
         default_factory=dict, description="name -> magnitude (`ema locations`)")
 

@@ -100,6 +100,13 @@ class ThresholdSpec(Strict):
     unit: str = Field("", description="unit of the reported value")
     paper: str = Field("", description="the paper's statement")
     paper_value: FiniteFloat | None = Field(None, description="the paper's threshold, same unit")
+    tuning: str | None = Field(
+        None, description="a tuning config (`ema tune`, relative to the experiment file): the "
+                          "search runs with the controller it tunes (its tuned values as plant "
+                          "overrides)")
+    compare_to: PlainName | None = Field(
+        None, description="an earlier threshold id: adds the scalar <id>_ratio = this "
+                          "threshold / that one")
 
     @field_validator("vary")
     @classmethod
@@ -224,6 +231,12 @@ class ExperimentConfig(Strict):
         _unique([s.id for s in self.studies], "study id")
         _unique([s.figure.lower() for s in self.studies], "figure file name")
         _unique([t.id for t in self.thresholds], "threshold id")
+        for k, t in enumerate(self.thresholds):
+            earlier = [u.id for u in self.thresholds[:k]]
+            if t.compare_to is not None and t.compare_to not in earlier:
+                raise ValueError(f"thresholds.{k} ({t.id}): compare_to '{t.compare_to}' is not "
+                                 "an earlier threshold id; earlier: "
+                                 f"{', '.join(earlier) or 'none'}")
         _unique([c.id for c in self.claims], "claim id")
         studies = {s.id for s in self.studies}
         known = ", ".join(sorted(studies)) or "none"
@@ -251,7 +264,9 @@ class ExperimentConfig(Strict):
         return self
 
     def _check_scalar(self, k: int, cid: str, name: str) -> None:
-        thresholds = [t.id for t in self.thresholds]
+        thresholds = ([t.id for t in self.thresholds]
+                      + [f"{t.id}_ratio" for t in self.thresholds if t.compare_to]
+                      + [f"{t.id}.tuning_cost" for t in self.thresholds if t.tuning])
         if name in thresholds:
             return
         if name.startswith("identification.") and self.identification is not None:

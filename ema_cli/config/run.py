@@ -167,6 +167,12 @@ class ControllerConfig(Strict):
         None, description="friction feed-forward: assumed Stribeck velocity [rad/s]")
     friction_ff_sigma2: NonNegFloat | None = Field(
         None, description="friction feed-forward: assumed viscous coefficient [N*m*s/rad]")
+    friction_ff_sigma0: NonNegFloat | None = Field(
+        None, description="friction compensation by a LuGre observer on the measured motor speed:"
+                          " assumed bristle stiffness [N*m/rad] (absent or 0: static feed-forward"
+                          " on the speed command)")
+    friction_ff_sigma1: NonNegFloat | None = Field(
+        None, description="LuGre observer: assumed bristle damping [N*m*s/rad]")
     friction_ff_band_rad_s: PositiveFloat | None = Field(
         None, description="friction feed-forward: sign smoothing band [rad/s] (default 0.5)")
     notch_hz: PositiveFloat | None = Field(
@@ -191,6 +197,7 @@ class ControllerConfig(Strict):
         pairs = {"dzi_v": c.deadzone_inverse_v, "dzi_band": c.deadzone_inverse_band_v,
                  "ff_fc": c.friction_ff_fc_nm, "ff_fs": c.friction_ff_fs_nm,
                  "ff_vs": c.friction_ff_vs_rad_s, "ff_sigma2": c.friction_ff_sigma2,
+                 "ff_sigma0": c.friction_ff_sigma0, "ff_sigma1": c.friction_ff_sigma1,
                  "ff_band": c.friction_ff_band_rad_s, "notch_hz": c.notch_hz,
                  "notch_depth": (None if c.notch_depth_db is None
                                  else 10.0 ** (c.notch_depth_db / 20.0)),
@@ -217,6 +224,7 @@ SECTION_PARAMS = {
     "controller.deadzone_inverse_v": "dzi_v", "controller.deadzone_inverse_band_v": "dzi_band",
     "controller.friction_ff_fc_nm": "ff_fc", "controller.friction_ff_fs_nm": "ff_fs",
     "controller.friction_ff_vs_rad_s": "ff_vs", "controller.friction_ff_sigma2": "ff_sigma2",
+    "controller.friction_ff_sigma0": "ff_sigma0", "controller.friction_ff_sigma1": "ff_sigma1",
     "controller.friction_ff_band_rad_s": "ff_band", "controller.notch_hz": "notch_hz",
     "controller.notch_depth_db": "notch_depth", "controller.notch_zeta": "notch_zeta",
     "sensors.position_counts_per_rev": "q_pos",
@@ -295,7 +303,7 @@ class RunConfig(Strict):
         if comp.get("dzi_v"):
             parts.append(f"dead-zone inverse {comp['dzi_v']:g} V")
         if comp.get("ff_fc") or comp.get("ff_sigma2"):
-            parts.append("friction feed-forward")
+            parts.append("friction observer" if comp.get("ff_sigma0") else "friction feed-forward")
         if comp.get("notch_hz"):
             parts.append(f"notch {comp['notch_hz']:g} Hz")
         if self.controller.position_feedback == "motor":

@@ -12,9 +12,9 @@ from collections.abc import Callable
 import numpy as np
 
 from ema_cli.identify.exact import solve_exact
-from ema_cli.identify.ga import preset, run_ga
 from ema_cli.identify.run import build_problem, load_data, run_identification
 from ema_cli.identify.settings import IdentifySettings
+from ema_cli.optim.ga import preset, run_ga
 from ema_cli.timing import median_time
 
 REPEATS = 5  # timed repeats after one warm-up call [-]

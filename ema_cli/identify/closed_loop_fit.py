@@ -32,10 +32,10 @@ from ema_cli.identify.closed_loop import (
     check_free,
     load_log,
 )
-from ema_cli.identify.ga import GAHistory, preset, run_ga
 from ema_cli.identify.log_settings import ClosedLoopSettings
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
 from ema_cli.model.params import BY_NAME
+from ema_cli.optim.ga import GAHistory, preset, run_ga
 
 FD_REL_STEP = 1e-4  # central-difference step, relative to max(|x|, 1e-3*(hi - lo)) [-]
 POLISH_TOL = 1e-10  # xtol/ftol/gtol of the least-squares polish [-]

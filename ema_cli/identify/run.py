@@ -26,9 +26,9 @@ from ema_cli.identify.data import (
     synthetic_data,
 )
 from ema_cli.identify.exact import ExactResult, profile, solve_exact
-from ema_cli.identify.ga import GAHistory, GAOptions, run_ga
 from ema_cli.identify.problem import PARAM_UNITS, TorqueProblem
 from ema_cli.identify.settings import IdentifySettings
+from ema_cli.optim.ga import GAHistory, GAOptions, run_ga
 from ema_cli.units import DEG
 
 DEADBAND_MARGIN = 0.10  # the dead band is "outside the range" if J beyond it is 10 % lower [-]

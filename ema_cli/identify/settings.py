@@ -23,9 +23,9 @@ from ema_cli.config.base import (
 )
 from ema_cli.config.run import KEY_MARK
 from ema_cli.errors import EmaError
-from ema_cli.identify import ga as ga_mod
 from ema_cli.identify.data import CSV_COLUMNS
 from ema_cli.model.params import check_value
+from ema_cli.optim import ga as ga_mod
 
 DEFAULT_K_RANGE = (500.0, 700.0)  # kL search range, paper §3.1 [N*m/rad]
 DEFAULT_ALPHA_RANGE = (0.002, 0.004)  # alpha search range, paper §3.1 [rad]

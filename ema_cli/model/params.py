@@ -71,6 +71,11 @@ PARAMS: tuple[Param, ...] = (
     Param("ff_vs", "rad/s", 1.0, "friction feed-forward: estimated Stribeck velocity"),
     Param("ff_sigma2", "N*m*s/rad", 0.0, "friction feed-forward: estimated viscous "
           "coefficient (0: off)"),
+    Param("ff_sigma0", "N*m/rad", 0.0, "friction compensation: LuGre observer bristle "
+          "stiffness (0: static Coulomb-Stribeck feed-forward on the speed command; > 0: a LuGre "
+          "observer on the measured motor speed)"),
+    Param("ff_sigma1", "N*m*s/rad", 0.0, "friction compensation: LuGre observer bristle "
+          "damping"),
     Param("ff_band", "rad/s", 0.5, "friction feed-forward: smoothing band of the Coulomb "
           "sign, motor speed command"),
     Param("notch_hz", "Hz", 0.0, "speed-loop notch filter centre frequency (0: off)"),
@@ -105,6 +110,11 @@ PARAMS: tuple[Param, ...] = (
     Param("q_speed", "rad/s", 0.0, "speed sensor resolution (0: none)"),
 )
 FLAGS = ("friction", "locked")
+CONTROLLER_PARAMS = ("Kpp", "Kps", "Kis", "fb_motor", "dzi_v", "dzi_band", "ff_fc", "ff_fs",
+                     "ff_vs", "ff_sigma2", "ff_sigma0", "ff_sigma1", "ff_band", "notch_hz",
+                     "notch_depth", "notch_zeta")
+"""The continuous parameters of the controller and its compensators (what `ema tune` may
+free); the sample time Ts is not among them (it must stay a multiple of the step)."""
 """0/1 parameters: accept off/on, false/true, 0/1."""
 
 INDEX: dict[str, int] = {p.name: i for i, p in enumerate(PARAMS)}
@@ -185,6 +195,9 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
                   else "notch_hz"] and not values[name] > 0:  # type: ignore[operator]
             raise EmaError(f"parameter '{name}' must be > 0 when its compensator is on, got "
                            f"{values[name]}")
+    if values["ff_sigma0"] and not values["ff_fc"] > 0:  # type: ignore[operator]
+        raise EmaError(f"parameter 'ff_sigma0' (LuGre friction observer) needs ff_fc > 0, got "
+                       f"ff_fc = {values['ff_fc']}")
     if values["fb_motor"] > 1.0:  # type: ignore[operator]
         raise EmaError(f"parameter 'fb_motor' (position feedback blend) must lie in [0, 1], "
                        f"got {values['fb_motor']}")

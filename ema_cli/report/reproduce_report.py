@@ -27,6 +27,7 @@ from ema_cli.analysis.reproduce import (
 )
 from ema_cli.config.base import check_plain_name
 from ema_cli.config.experiment import ExperimentConfig, StudySpec
+from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
 from ema_cli.report.identify_figures import identification_summary
@@ -47,6 +48,33 @@ def _under(out: Path, *names: str) -> Path:
     for name in names:
         check_plain_name(name, "an output file or folder name")
     return out.joinpath(*names)
+
+
+def run_threshold_tuning(path: Path, tid: str, rel: str, log: Any = print
+                         ) -> tuple[dict[str, float], dict[str, Any]]:
+    """Run the tuning config ``rel`` (relative to the experiment file ``path``) of threshold
+    ``tid`` -> (tuned values, summary: cost, constraints met, evaluations, seconds)."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.tune import TuneConfig
+    from ema_cli.tune.problem import build_scenarios
+    from ema_cli.tune.run import run_tuning
+
+    cpath = (path.parent / rel).resolve()
+    if not cpath.is_file():
+        raise EmaError(f"{path}: threshold '{tid}': tuning '{rel}' is not a file")
+    cfg = load_config(cpath, [], TuneConfig)
+    log(f"tuning for threshold {tid}: {cpath} ({cfg.optimiser.method}, budget "
+        f"{cfg.optimiser.budget})")
+    scenarios, _ = build_scenarios(cfg, cpath.parent)
+    o = run_tuning(cfg, scenarios)
+    if not o.feasible:
+        raise EmaError(f"{path}: threshold '{tid}': the tuning {rel} met no feasible "
+                       "controller")
+    values = {v: float(x) for v, x in zip(o.problem.variables, o.best.x, strict=True)}
+    summary = {"config": rel, "cost": float(o.after.cost[0]), "feasible": o.feasible,
+               "evaluations": int(o.timings["evaluations"]), "wall_s": o.wall_s,
+               "method": o.method}
+    return values, summary
 
 
 def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
@@ -70,7 +98,13 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
         rep.studies[s.id] = res.metrics
         rep.sweeps[s.id] = res
     rep.timings["studies"] = time.perf_counter() - t0
-    compute_thresholds(rep, log)
+    tuned = {}
+    for t in rep.exp.thresholds:
+        if t.tuning is not None:
+            t1 = time.perf_counter()
+            tuned[t.id] = run_threshold_tuning(path, t.id, t.tuning, log)
+            rep.timings[f"tuning_{t.id}"] = time.perf_counter() - t1
+    compute_thresholds(rep, log, tuned)
     if rep.exp.sensitivity is not None:
         t0 = time.perf_counter()
         spec = rep.exp.sensitivity
@@ -244,6 +278,17 @@ def render_report(rep: Reproduction, wall: float) -> str:
                          "bracket": f"[{t.result.bracket[0]:.4g}, {t.result.bracket[1]:.4g}]",
                          "simulations": t.result.n_sims, "comparison": verdict})
         lines += [_md_table(pd.DataFrame(rows)), ""]
+        for t in rep.thresholds:
+            if t.tuned is not None and t.tuning is not None:
+                lines += [f"Threshold `{t.spec.id}` runs with the controller tuned by `ema tune "
+                          f"{t.tuning['config']}` ({t.tuning['method'].upper()}, "
+                          f"{t.tuning['evaluations']} evaluations, {t.tuning['wall_s']:.0f} s; "
+                          f"cost {t.tuning['cost']:.4g} of the default controller's 1, every "
+                          "constraint met): "
+                          + ", ".join(f"{k} = {v:.5g}" for k, v in t.tuned.items()) + ".", ""]
+            if t.spec.compare_to is not None:
+                lines += [f"`{t.spec.id}` is {rep.scalars[t.spec.id + '_ratio']:.3g} times "
+                          f"`{t.spec.compare_to}`.", ""]
         for t in rep.thresholds:
             lines += [f"![threshold {t.spec.id}](threshold_{t.spec.id}.png)", ""]
     if rep.ranking is not None and exp.ranking is not None:

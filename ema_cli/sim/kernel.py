@@ -88,6 +88,7 @@ _DZI, _DZIB = INDEX["dzi_v"], INDEX["dzi_band"]
 _FFC, _FFS, _FFV, _FFS2, _FFB = (INDEX[k] for k in ("ff_fc", "ff_fs", "ff_vs", "ff_sigma2",
                                                     "ff_band"))
 _NHZ, _NDEPTH, _NZETA = INDEX["notch_hz"], INDEX["notch_depth"], INDEX["notch_zeta"]
+_FFSIG0, _FFSIG1 = INDEX["ff_sigma0"], INDEX["ff_sigma1"]
 
 # signal columns (W's recording rows, sig) and metric columns (met)
 _S_BRISTLE_Z = SIG["bristle_z"]
@@ -139,11 +140,11 @@ _P0 = 0
 _D0 = _P0 + N_PARAMS
 # 1/m, 1/L, 1/Jm, 1/JL, contact form?, steps per controller sample, sample countdown, held
 # voltage, running?, step it diverged at, is the input a step?, step size, step time, 1/q_pos,
-# 1/q_speed, notch: w and output gain, notch states x1, x2
+# 1/q_speed, notch: w and output gain, notch states x1, x2, friction observer's bristle state
 (_D_INVM, _D_INVL, _D_INVJM, _D_INVJL, _D_CONTACT, _D_NS, _D_CNT, _D_UH, _D_ALIVE, _D_KEND,
  _D_ISSTEP, _D_STEP, _D_TSTEP, _D_INVQP, _D_INVQS, _D_NW, _D_NC, _D_XN1,
- _D_XN2) = range(_D0, _D0 + 19)
-_X0 = _D0 + 19
+ _D_XN2, _D_ZH) = range(_D0, _D0 + 20)
+_X0 = _D0 + 20
 _X_THM, _X_WM, _X_I = (_X0 + STATE_INDEX[k] for k in ("theta_m", "w_m", "i"))
 _X_THL, _X_WL = _X0 + STATE_INDEX["theta_L"], _X0 + STATE_INDEX["w_L"]
 _X_Z, _X_XI = _X0 + STATE_INDEX["z"], _X0 + STATE_INDEX["xI"]
@@ -173,22 +174,24 @@ _NAN = np.nan
 
 @njit(cache=True, forceinline=True, error_model="numpy")
 def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, locked, extras,
-           xn2):
+           xn2, tfh):
     """Time derivatives of (theta_m, w_m, i, theta_L, w_L, xI) for one lane (bristle torque
-    ``tf_b``, held voltage ``uh`` and notch state ``xn2`` given). ``prm`` is the tuple built by
-    :func:`_lane_params`."""
+    ``tf_b``, held voltage ``uh``, notch state ``xn2`` and the friction observer's held bristle
+    torque ``tfh`` given). ``prm`` is the tuple built by :func:`_lane_params`."""
     (m, inv_m, inv_l, inv_jm, inv_jl, r_a, kt, ke, bm, bl, kl, alpha, c, contact, kpp, kps, kis,
      sat1, sat2, sat3, d1, d3, d4, q_pos, q_speed, t_const, k_h, _, _, _, _, delta, _, _, _, _,
-     _, _, _, _, _, inv_qp, inv_qs, fb, dzi, dzib, ffc, ffs, ffv, ffs2, ffb, _, nc, _) = prm
+     _, _, _, _, _, inv_qp, inv_qs, fb, dzi, dzib, ffc, ffs, ffv, ffs2, ffb, _, nc, _, ffsig0,
+     _) = prm
     if not extras:  # no quantisers (a constant at each call site)
         q_pos = 0.0
         q_speed = 0.0
     th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs,
                                  th_m * inv_m, fb)
     e_w, u_unsat, u_dem = cascade_nb(r, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
-    if extras:  # friction feed-forward on the speed command, then the notch (held state)
-        u_unsat = (u_unsat + r_a / kt * friction_ff_nb(e_w + w_meas, w_meas, ffc, ffs, ffv,
-                                                       delta, ffs2, ffb) + nc * xn2)
+    if extras:  # friction compensation, then the notch (held state)
+        t_ff = (tfh + ffs2 * w_meas if ffsig0 > 0.0
+                else friction_ff_nb(e_w + w_meas, w_meas, ffc, ffs, ffv, delta, ffs2, ffb))
+        u_unsat = u_unsat + r_a / kt * t_ff + nc * xn2
         u_dem = saturate_nb(u_unsat, sat2)
     u = uh if disc else u_dem
     if extras:
@@ -217,7 +220,8 @@ def _lane_params(W, j):
             W[_SIG1, j], W[_SIG2, j], W[_D_NS, j], W[_TS, j], W[_LOCKED, j] != 0.0,
             W[_D_ISSTEP, j] != 0.0, W[_D_STEP, j], W[_D_TSTEP, j], W[_D_INVQP, j],
             W[_D_INVQS, j], W[_FB, j], W[_DZI, j], W[_DZIB, j], W[_FFC, j], W[_FFS, j],
-            W[_FFV, j], W[_FFS2, j], W[_FFB, j], W[_D_NW, j], W[_D_NC, j], W[_NZETA, j])
+            W[_FFV, j], W[_FFS2, j], W[_FFB, j], W[_D_NW, j], W[_D_NC, j], W[_NZETA, j],
+            W[_FFSIG0, j], W[_FFSIG1, j])
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -231,7 +235,7 @@ def _load(W, j):
            W[_A0 + 15, j], W[_A0 + 16, j], W[_A0 + 17, j], W[_A0 + 18, j], W[_A0 + 19, j],
            W[_A0 + 20, j], W[_A0 + 21, j])
     ctl = (W[_D_CNT, j], W[_D_UH, j], W[_D_ALIVE, j], W[_D_KEND, j], W[_D_XN1, j],
-           W[_D_XN2, j])
+           W[_D_XN2, j], W[_D_ZH, j])
     return x, acc, ctl
 
 
@@ -250,6 +254,7 @@ def _store(W, j, x, acc, ctl):
     W[_D_KEND, j] = ctl[3]
     W[_D_XN1, j] = ctl[4]
     W[_D_XN2, j] = ctl[5]
+    W[_D_ZH, j] = ctl[6]
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -291,11 +296,11 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extra
     (m, inv_m, _, _, _, _, _, _, _, _, kl, alpha, c, contact, kpp, kps, kis, sat1, sat2, sat3,
      d1, d3, d4, q_pos, q_speed, t_const, k_h, fr, fc, fs, vs, delta, sig0, sig1, sig2, ns, ts,
      locked, is_step, step, t_step, inv_qp, inv_qs, fb, dzi, dzib, ffc, ffs, ffv, ffs2, ffb, nw,
-     nc, nz) = lp
+     nc, nz, ffsig0, ffsig1) = lp
     th_m, w_m, i, th_l, w_l, z, x_i = x
     (iae, ise, itae, iaev, isev, itaev, emax, evmax, ss, emin_o, emax_o, evmin_o, evmax_o, smax,
      t10, t50, t90, last_out, pki, pku, pkwl, pkt) = acc
-    cnt, uh, alive, kend, xn1, xn2 = ctl
+    cnt, uh, alive, kend, xn1, xn2, zh = ctl
     r0, r1, r2, rv, l0, l1, l2 = inp
     if not extras:
         ns = 0.0
@@ -319,10 +324,17 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extra
                                  th_m * inv_m, fb)
     e_w, u_unsat, u_dem = cascade_nb(r0, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
     xn1_next, xn2_next = xn1, xn2
-    if extras:  # friction feed-forward on the speed command, then the notch
+    zh_next = zh
+    tfh = 0.0
+    if extras:  # friction compensation (feed-forward or LuGre observer), then the notch
         r_a, kt = lp[5], lp[6]
-        u_pre = u_unsat + r_a / kt * friction_ff_nb(e_w + w_meas, w_meas, ffc, ffs, ffv,
-                                                    delta, ffs2, ffb)
+        if ffsig0 > 0.0:  # the observer's bristle state, advanced like the plant's (held)
+            zh_next, tfh = bristle_step_nb(zh, w_meas, dt, ffc, max(ffs, ffc), ffv, delta,
+                                           ffsig0, ffsig1)
+            t_ff = tfh + ffs2 * w_meas
+        else:
+            t_ff = friction_ff_nb(e_w + w_meas, w_meas, ffc, ffs, ffv, delta, ffs2, ffb)
+        u_pre = u_unsat + r_a / kt * t_ff
         u_unsat = u_pre + nc * xn2
         u_dem = saturate_nb(u_unsat, sat2)
         if nw > 0.0:
@@ -375,18 +387,18 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extra
     x_i = x_i_next
     h = dt
     a1, b1, c1, d1, e1, f1 = _rates(th_m, w_m, i, th_l, w_l, x_i, r0, l0, lp, tf_b, visc,
-                                    uh, disc, locked, extras, xn2)
+                                    uh, disc, locked, extras, xn2, tfh)
     a2, b2, c2, d2, e2, f2 = _rates(th_m + 0.5 * h * a1, w_m + 0.5 * h * b1,
                                     i + 0.5 * h * c1, th_l + 0.5 * h * d1,
                                     w_l + 0.5 * h * e1, x_i + 0.5 * h * f1, r1, l1, lp,
-                                    tf_b, visc, uh, disc, locked, extras, xn2)
+                                    tf_b, visc, uh, disc, locked, extras, xn2, tfh)
     a3, b3, c3, d3, e3, f3 = _rates(th_m + 0.5 * h * a2, w_m + 0.5 * h * b2,
                                     i + 0.5 * h * c2, th_l + 0.5 * h * d2,
                                     w_l + 0.5 * h * e2, x_i + 0.5 * h * f2, r1, l1, lp,
-                                    tf_b, visc, uh, disc, locked, extras, xn2)
+                                    tf_b, visc, uh, disc, locked, extras, xn2, tfh)
     a4, b4, c4, d4, e4, f4 = _rates(th_m + h * a3, w_m + h * b3, i + h * c3, th_l + h * d3,
                                     w_l + h * e3, x_i + h * f3, r2, l2, lp, tf_b, visc,
-                                    uh, disc, locked, extras, xn2)
+                                    uh, disc, locked, extras, xn2, tfh)
     h6 = h / 6.0
     th_m += h6 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
     w_m += h6 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
@@ -401,7 +413,7 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extra
     kend = k + 1.0 if dies else kend
     alive = 0.0 if dies else alive
     return (th_m, w_m, i, th_l, w_l, z_new, x_i), acc, (cnt, uh, alive, kend, xn1_next,
-                                                        xn2_next), out
+                                                        xn2_next, zh_next), out
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -429,7 +441,7 @@ def _variant(W):
         fric_chunk = fric_chunk or W[_FRIC, j] != 0.0
         extras = extras or (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
                             or W[_LOCKED, j] != 0.0 or W[_DZI, j] > 0.0 or W[_FFC, j] > 0.0
-                            or W[_FFS2, j] > 0.0 or W[_NHZ, j] > 0.0)
+                            or W[_FFS2, j] > 0.0 or W[_NHZ, j] > 0.0 or W[_FFSIG0, j] > 0.0)
     return fric_chunk, extras
 
 
@@ -454,6 +466,7 @@ def _init(W, n_real, step_info, qidx, dt, n_steps):
             W[_D_NW, j], W[_D_NC, j] = 0.0, 0.0
         W[_D_XN1, j] = 0.0
         W[_D_XN2, j] = 0.0
+        W[_D_ZH, j] = 0.0
         ts = W[_TS, j]
         W[_D_NS, j] = np.floor(ts / dt + 0.5) if ts > 0.0 else 0.0
         W[_D_ALIVE, j] = 1.0

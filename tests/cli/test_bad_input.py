@@ -30,6 +30,7 @@ WRITERS = {
     "freqresp": ["freqresp", "--amplitudes", "1", "--f-min", "5", "--f-max", "10", "--n", "2"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
     "acceptance": ["acceptance", str(ROOT / "configs" / "acceptance.yaml"), "--only", "margins"],
+    "tune": ["tune", str(ROOT / "configs" / "tune.yaml"), "--budget", "64"],
     "sensitivity": ["sensitivity", str(ROOT / "configs" / "sensitivity.yaml"), "--n", "1",
                     "--set", "simulation.duration_s=0.01", "--no-progress", "-j", "1"],
 }
@@ -289,3 +290,17 @@ def test_validate_accepts_a_run_config(tmp_path):
     p.write_text("input:\n  kind: step\n  amplitude_deg: 1\n")
     r = invoke("validate", str(p))
     assert r.exit_code == 0 and "valid run config" in " ".join(r.output.split())
+
+
+@pytest.mark.parametrize(("args", "needles"), [
+    (["--budget", "0"], ["--budget", "[1, 1000000]"]),
+    (["--runs", "0"], ["--runs", "[1, 100]"]),
+    (["--method", "pso"], ["--method", "ga or de"]),
+    (["--set", "variables.Kpp.bounds=[5,1]"], ["variables.Kpp", "above the upper bound"]),
+    (["--set", "variables.kL.bounds=[300,900]"], ["variables.kL", "unknown variable"]),
+    (["--set", "constraints.overshoot.max=-1"], ["constraints.overshoot.max", "infeasible"]),
+])
+def test_bad_tune_options(tmp_path, args, needles):
+    one_clear_line(invoke("tune", str(ROOT / "configs" / "tune.yaml"), *args,
+                          "--out", str(tmp_path / "o")), *needles)
+    assert not (tmp_path / "o").exists()

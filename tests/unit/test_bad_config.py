@@ -452,7 +452,10 @@ def test_bundled_experiment_and_configs_still_validate():
     for f in sorted((root / "configs").glob("*.yaml")):
         from ema_cli.config.sensitivity import SensitivityConfig
 
+        from ema_cli.config.tune import TuneConfig
+
         models["sensitivity"] = SensitivityConfig
+        models["tune"] = TuneConfig
         load_config(f, (), models.get(f.stem, StudyConfig))
 
 

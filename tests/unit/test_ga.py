@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ema_cli.identify import operators as ops
-from ema_cli.identify.ga import GAOptions, preset, run_ga
+from ema_cli.optim import operators as ops
+from ema_cli.optim.ga import GAOptions, preset, run_ga
 
 LO = np.array([-2.0, 10.0])
 HI = np.array([3.0, 20.0])

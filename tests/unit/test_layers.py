@@ -22,7 +22,7 @@ from pathlib import Path
 PACKAGE = "ema_cli"
 ROOT = Path(__file__).resolve().parents[2] / PACKAGE
 LAYERS = {"cli": 7, "api": 6, "report": 5, "analysis": 4, "sweep": 4, "identify": 4,
-          "acceptance": 4, "sensitivity": 4, "config": 3,
+          "acceptance": 4, "sensitivity": 4, "optim": 4, "tune": 4, "config": 3,
           "sim": 2, "model": 1}
 """Layer of each folder of the package; top-level modules are layer 0."""
 TOP = ""  # the "folder" of the top-level modules
@@ -212,7 +212,7 @@ def test_the_scan_sees_the_package():
     assert {"ema_cli.cli.main", "ema_cli.sim.runner", "ema_cli.errors"} <= set(modules)
     found = {(e.source, e.target) for e in edges}
     assert ("ema_cli.sim.runner", "ema_cli.sim.kernel") in found
-    assert ("ema_cli.identify.ga", "ema_cli.identify.operators") in found  # from pkg import mod
+    assert ("ema_cli.optim.ga", "ema_cli.optim.operators") in found  # from pkg import mod
     assert folder_of("ema_cli.errors", modules) == TOP
     assert folder_of("ema_cli.cli", modules) == "cli"
     assert set(LAYERS) == {folder_of(m, modules) for m in modules} - {TOP}

@@ -28,7 +28,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from ema_cli.identify import operators as ops
+from ema_cli.optim import operators as ops
 
 # defaults (the paper's settings, §3.1, where it gives them)
 DEFAULT_POP = 100  # population size [individuals]

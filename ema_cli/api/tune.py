@@ -1,0 +1,266 @@
+"""``api.tune``: tune the controller gains and compensators over scenarios (``ema tune``)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
+from ema_cli.errors import EmaError
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from ema_cli.config.tune import TuneConfig
+    from ema_cli.tune.run import TuneOutcome
+
+RECORD_DT_S = 1.0e-4  # interval of the recorded before/after signals [s]
+CONTROLLERS = ("reference", "before", "after")
+"""The three controllers the report compares: the default controller (no scenario
+compensators), the start (scenario compensators, variables at the actuator's values) and the
+tuned one."""
+
+
+@dataclass
+class TuneResult:
+    """A finished tuning (see :class:`ema_cli.tune.run.TuneOutcome`) and where it came from."""
+
+    config: TuneConfig
+    outcome: TuneOutcome
+    source: str
+    overrides: list[tuple[str, Any]] = field(default_factory=list)
+
+    # ------------------------------------------------------------------ values
+    @property
+    def variables(self) -> list[str]:
+        return list(self.outcome.problem.variables)
+
+    @property
+    def tuned(self) -> dict[str, float]:
+        """The tuned values (SI, `ema params` names)."""
+        return {v: float(x) for v, x in zip(self.variables, self.outcome.best.x, strict=True)}
+
+    @property
+    def initial(self) -> dict[str, float]:
+        return {v: float(x) for v, x in zip(self.variables, self.outcome.initial, strict=True)}
+
+    @property
+    def cost(self) -> float:
+        """The tuned cost (normalised: 1 is the default controller's)."""
+        return float(self.outcome.after.cost[0])
+
+    @property
+    def title(self) -> str:
+        return f"{self.config.name}: tuning ({self.outcome.method.upper()})"
+
+    def evaluation(self, which: str) -> Any:
+        if which not in CONTROLLERS:
+            raise EmaError(f"which must be one of {', '.join(CONTROLLERS)}, got {which!r}")
+        return getattr(self.outcome, which)
+
+    # ------------------------------------------------------------------ documents
+    def scenario_document(self, name: str, which: str = "after") -> dict[str, Any]:
+        """The run config of scenario ``name`` with controller ``which`` (``after``: the tuned
+        values in ``plant``; ``before``: as configured; ``reference``: the default controller,
+        the scenario's compensators removed), runnable with ``ema simulate``."""
+        import copy
+
+        sc = {s.name: s for s in self.outcome.problem.scenarios}
+        if name not in sc:
+            raise EmaError(f"no scenario {name!r}; scenarios: {', '.join(sc)}")
+        if which not in CONTROLLERS:
+            raise EmaError(f"which must be one of {', '.join(CONTROLLERS)}, got {which!r}")
+        src = sc[name].reference_document if which == "reference" else sc[name].document
+        doc = copy.deepcopy(src)
+        if which == "after":
+            doc["plant"] = {**(doc.get("plant") or {}), **self.tuned}
+        doc["name"] = f"{sc[name].document['name']}-{which}"
+        doc["description"] = (f"{self.config.name}: scenario {name} with the "
+                              + {"after": "tuned controller", "before": "controller before "
+                                 "tuning (the scenario's compensators, the variables at their "
+                                 "start)", "reference": "default controller (no compensators)"
+                                 }[which])
+        return doc
+
+    def tuned_document(self) -> dict[str, Any]:
+        """tuned.yaml: the actuator's run config with the tuned values (in ``plant``), on the
+        first scenario's input and the tuning grid, without any scenario's condition."""
+        import copy
+
+        first = self.outcome.problem.scenarios[0]
+        act = copy.deepcopy(self.outcome.actuator_document)
+        act["name"] = f"{self.config.name}-tuned"
+        act["description"] = (f"{self.config.name}: the actuator with the tuned controller "
+                              f"({', '.join(f'{k} = {v:.6g}' for k, v in self.tuned.items())})")
+        act["plant"] = {**(act.get("plant") or {}), **self.tuned}
+        act["input"] = copy.deepcopy(first.document["input"])
+        act["simulation"] = copy.deepcopy(first.document["simulation"])
+        return act
+
+    # ------------------------------------------------------------------ tables
+    def history(self) -> pd.DataFrame:
+        """tuning.csv: per run and generation the evaluations so far, the generation's best
+        and mean score, the best so far, its cost when feasible and its variable values."""
+        import numpy as np
+        import pandas as pd
+
+        from ema_cli.tune.problem import INFEASIBLE
+
+        frames = []
+        prob = self.outcome.problem
+        for k, r in enumerate(self.outcome.runs):
+            h = r.result.history
+            ever = np.asarray(h.best_ever)
+            df = pd.DataFrame({
+                "run": k, "seed": r.seed, "generation": np.arange(len(ever)),
+                "evaluations": h.evaluations, "best_score": h.best, "mean_score": h.mean,
+                "best_ever_score": ever,
+                "best_ever_feasible": ever < INFEASIBLE,
+                "best_ever_cost": np.where(ever < INFEASIBLE, ever, np.nan)})
+            vals = prob.values(np.asarray(h.x_best_ever))
+            for j, v in enumerate(self.variables):
+                df[v] = vals[:, j]
+            frames.append(df)
+        return pd.concat(frames, ignore_index=True)
+
+    def runs_frame(self) -> pd.DataFrame:
+        """runs.csv: one row per run (seed): cost, feasibility, budget used, time, values."""
+        import pandas as pd
+
+        rows = []
+        for r in self.outcome.runs:
+            row = {"seed": r.seed, "method": self.outcome.method, "cost": r.cost,
+                   "feasible": r.feasible, "evaluations": r.result.evaluations,
+                   "generations": r.result.generations, "wall_s": r.result.wall_time_s}
+            row.update({v: float(x) for v, x in zip(self.variables, r.x, strict=True)})
+            rows.append(row)
+        return pd.DataFrame(rows)
+
+    def scenarios_frame(self) -> pd.DataFrame:
+        """Per scenario: the cost metric (edge units) and its ratio to the default controller
+        for the three controllers."""
+        import pandas as pd
+
+        from ema_cli.units import DEG
+
+        metric = self.config.cost.metric
+        unit = {"itae": "deg_s2", "iae": "deg_s", "ise": "deg2_s"}[metric]
+        scale = 1.0 / DEG**2 if metric == "ise" else 1.0 / DEG
+        rows = []
+        for s, sc in enumerate(self.outcome.problem.scenarios):
+            row: dict[str, Any] = {"scenario": sc.name, "weight": sc.weight}
+            for w in CONTROLLERS:
+                ev = self.evaluation(w)
+                row[f"{metric}_{unit}_{w}"] = float(ev.metric[0, s]) * scale
+                row[f"ratio_{w}"] = float(ev.ratio[0, s])
+            rows.append(row)
+        return pd.DataFrame(rows)
+
+    def constraints_frame(self) -> pd.DataFrame:
+        """Per scenario and constraint: the limit and the value (limit's unit) of the three
+        controllers, and whether the tuned one meets it."""
+        import pandas as pd
+
+        from ema_cli.units import UNITS
+
+        rows = []
+        for s, sc in enumerate(self.outcome.problem.scenarios):
+            for name, lim in self.config.constraints_of(sc.name).items():
+                f = UNITS[lim.unit][1]
+                row: dict[str, Any] = {"scenario": sc.name, "constraint": name,
+                                       "min": lim.min, "max": lim.max, "unit": lim.unit}
+                for w in CONTROLLERS:
+                    row[w] = float(self.evaluation(w).constraint[name][0, s]) / f
+                lo, hi = lim.si()
+                v = float(self.evaluation("after").constraint[name][0, s])
+                row["met"] = bool(lo <= v <= hi)
+                rows.append(row)
+        return pd.DataFrame(rows)
+
+    # ------------------------------------------------------------------ figures and files
+    def plot(self, kind: str = "convergence", scenario: str | None = None) -> Figure:
+        """``convergence`` (best cost vs evaluations, every run) or ``scenario`` (load angle
+        and error of the three controllers on ``scenario``)."""
+        from ema_cli.report.tune_report import convergence_figure, scenario_figure
+
+        if kind == "convergence":
+            return convergence_figure(self)
+        if kind == "scenario":
+            names = [s.name for s in self.outcome.problem.scenarios]
+            return scenario_figure(self, names.index(scenario) if scenario in names else 0)
+        raise EmaError(f"kind must be 'convergence' or 'scenario', got {kind!r}")
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write tuned.yaml, scenarios/*.yaml, tuning.csv, runs.csv, scenarios.csv,
+        constraints.csv, convergence.png, one before/after figure per scenario, tuning.md,
+        the resolved config and a manifest."""
+        import yaml
+
+        from ema_cli.hashing import content_hash
+        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.tune_report import write_tuning
+
+        cfg_json = self.config.model_dump(mode="json", by_alias=True)
+        out, _ = prepare_output("tune", f"tune-{self.config.name}",
+                                content_hash({"cfg": cfg_json, "method": self.outcome.method,
+                                              "runs": len(self.outcome.runs)}, 16),
+                                folder_arg(folder))
+        write_tuning(out, yaml.safe_dump(cfg_json, sort_keys=False), self)
+        finish_output(out)
+        return out
+
+
+def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
+         runs: int | None = None, budget: int | None = None,
+         progress: Callable[[int, int, int], None] | None = None) -> TuneResult:
+    """Tune the controller of ``config`` (a tuning config: YAML file, dict or
+    :class:`~ema_cli.config.tune.TuneConfig`); ``method`` (ga|de), ``runs`` (seeds) and
+    ``budget`` (candidate evaluations per run) override the config's optimiser section.
+    ``progress(run, done, total)`` is called after each generation. Raises EmaError when no
+    candidate meets every constraint (nothing is written then)."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.tune import MAX_BUDGET, MAX_RUNS, TuneConfig
+    from ema_cli.tune.problem import build_scenarios
+    from ema_cli.tune.run import run_tuning
+
+    if config is None:
+        raise EmaError("tune needs a tuning config (a YAML file such as configs/tune.yaml)")
+    if method is not None and method not in ("ga", "de"):
+        raise EmaError(f"--method must be ga or de, got {method!r}")
+    for value, name, cap in ((runs, "--runs", MAX_RUNS), (budget, "--budget", MAX_BUDGET)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or not 1 <= value <= cap):
+            raise EmaError(f"{name} must be an integer in [1, {cap}], got {value!r}")
+    pairs = override_pairs(overrides)
+    cfg = load_config(config, pairs, TuneConfig)
+    scenarios, actuator_doc = build_scenarios(cfg, base_dir(config))
+    outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S)
+    outcome.actuator_document = actuator_doc
+    res = TuneResult(cfg, outcome, str(config) if isinstance(config, str | Path) else "dict",
+                     pairs)
+    if not outcome.feasible:
+        raise EmaError(infeasible_message(res))
+    return res
+
+
+def infeasible_message(res: TuneResult) -> str:
+    """One line: no candidate met every constraint, and which the best one violates most."""
+    ev = res.outcome.after
+    worst = ""
+    df = res.constraints_frame()
+    bad = df[~df["met"]]
+    if len(bad):
+        r = bad.iloc[0]
+        bound = f"<= {r['max']:g}" if r["max"] is not None and not math.isnan(
+            r["max"]) else f">= {r['min']:g}"
+        worst = (f"; the best violates scenarios.{r['scenario']} {r['constraint']} "
+                 f"{r['after']:.4g} {r['unit']} (limit {bound} {r['unit']})")
+    elif ev.diverged.any():
+        worst = "; the best diverges"
+    return (f"no candidate met every constraint in {int(res.outcome.timings['evaluations'])} "
+            f"evaluations{worst}: relax the constraints, widen the bounds or raise --budget "
+            "(infeasible constraints)")

@@ -1,0 +1,1 @@
+"""Tuning of the controller and its compensators over scenarios (`ema tune`)."""
