@@ -451,7 +451,6 @@ def test_bundled_experiment_and_configs_still_validate():
     models = {"identify": IdentifySettings, "acceptance": AcceptanceSpec}
     for f in sorted((root / "configs").glob("*.yaml")):
         from ema_cli.config.sensitivity import SensitivityConfig
-
         from ema_cli.config.tune import TuneConfig
 
         models["sensitivity"] = SensitivityConfig
