@@ -204,7 +204,7 @@ class OptimiserConfig(Strict):
                                                           "seed+1, ...); the best is kept")
     seed: Seed = Field(0, description="seed of the first run")
     polish: float = Field(
-        0.25, ge=0.0, le=0.9, description="fraction of the budget for a compass (pattern) "
+        0.0, ge=0.0, le=0.9, description="fraction of the budget for a compass (pattern) "
                                            "search from the best point after the global "
                                            "optimiser (0: none)")
     patience: NonNegInt = Field(
