@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -99,16 +99,6 @@ class AcceptanceResult:
         return out
 
 
-def _dotted(tree: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
-    """``{"controller": {"position_feedback": "motor"}}`` or ``{"controller.position_feedback":
-    "motor"}`` -> ``[("controller.position_feedback", "motor")]``."""
-    out: list[tuple[str, Any]] = []
-    for k, v in tree.items():
-        key = f"{prefix}{k}"
-        out += _dotted(v, key + ".") if isinstance(v, Mapping) and v else [(key, v)]
-    return out
-
-
 def _actuator_pairs(spec: AcceptanceSpec) -> list[tuple[str, Any]]:
     act = spec.actuator
     return ([(f"plant.{k}", v) for k, v in act.plant.items()]
@@ -125,7 +115,7 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
 
     from ema_cli.acceptance.battery import run_test, verdicts
     from ema_cli.config.acceptance import AcceptanceSpec
-    from ema_cli.config.loader import load_config, resolve_run
+    from ema_cli.config.loader import dotted_pairs, load_config, resolve_run
     from ema_cli.config.study import StudyConfig
 
     if spec is None:
@@ -166,7 +156,7 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     for name in names:
         test = sp.tests[name]
         p, d = (params, dt) if not test.overrides else resolved(
-            _dotted(test.overrides), f"tests.{name}.set")
+            dotted_pairs(test.overrides), f"tests.{name}.set")
         run = run_test(name, test, p, d)
         runs.append(run)
         rows += verdicts(run, test.limits)

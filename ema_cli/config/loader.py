@@ -179,6 +179,16 @@ def parse_value(text: str) -> Any:
     return value
 
 
+def dotted_pairs(tree: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    """``{"controller": {"position_feedback": "motor"}}`` or ``{"controller.position_feedback":
+    "motor"}`` -> ``[("controller.position_feedback", "motor")]`` (for :func:`apply_overrides`)."""
+    out: list[tuple[str, Any]] = []
+    for k, v in tree.items():
+        key = f"{prefix}{k}"
+        out += dotted_pairs(v, key + ".") if isinstance(v, Mapping) and v else [(key, v)]
+    return out
+
+
 def apply_overrides(
     data: Mapping[str, Any], overrides: Sequence[tuple[str, Any]], top_keys: Sequence[str]
 ) -> dict[str, Any]:

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from ema_cli.analysis.linear import LINEAR_PARAMS, closed_loop_stable, margins
-from ema_cli.config.loader import load_config, read_yaml, resolve_run
+from ema_cli.config.loader import dotted_pairs, load_config, read_yaml, resolve_run
 from ema_cli.config.run import RunConfig
 from ema_cli.config.tune import TuneConfig
 from ema_cli.errors import EmaError
@@ -87,14 +87,6 @@ class Evaluation:
         return self.violation == 0.0
 
 
-def _dotted(tree: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
-    out: list[tuple[str, Any]] = []
-    for k, v in tree.items():
-        key = f"{prefix}{k}"
-        out += _dotted(v, key + ".") if isinstance(v, Mapping) and v else [(key, v)]
-    return out
-
-
 def scenario_document(cfg: TuneConfig, name: str, actuator: Mapping[str, Any],
                       compensators: bool = True) -> dict[str, Any]:
     """The run config (document) of scenario ``name``: the actuator's run config with the
@@ -106,7 +98,7 @@ def scenario_document(cfg: TuneConfig, name: str, actuator: Mapping[str, Any],
     sc = cfg.scenarios[name]
     doc = {k: v for k, v in actuator.items() if k in RUN_KEYS}
     plant = {k: v for k, v in sc.plant.items() if compensators or k not in CONTROLLER_PARAMS}
-    sets = [(k, v) for k, v in _dotted(sc.overrides)
+    sets = [(k, v) for k, v in dotted_pairs(sc.overrides)
             if compensators or not k.startswith("controller.")]
     pairs: list[tuple[str, Any]] = (
         [(f"plant.{k}", v) for k, v in cfg.actuator.plant.items()]
