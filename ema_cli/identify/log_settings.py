@@ -30,6 +30,7 @@ DEFAULT_CL_POP = 48  # closed-loop GA population [individuals]
 DEFAULT_CL_GENERATIONS = 40  # closed-loop GA generations, the initial one included
 DEFAULT_MAX_ITER = 30  # most Jacobian evaluations of the least-squares polish
 DEFAULT_PROFILE_POINTS = 41  # alpha values of the cost profile [points]
+DEFAULT_GA_HORIZON_S = 1.0  # the GA fits the log's first second (docs/identification.md) [s]
 MAX_CL_POP = 4096  # the largest closed-loop population [individuals]
 MAX_CL_GENERATIONS = 10_000  # the most closed-loop generations
 MAX_NOISE_PCT = 100.0  # the largest noise of synthetic data [% of the RMS]
@@ -75,6 +76,9 @@ class ClosedLoopSettings(Strict):
                                                           "the uncertainty [s]")
     ga_dt_s: PositiveFloat | None = Field(DEFAULT_GA_DT_S,
                                           description="integration step of the GA [s] (null: dt_s)")
+    ga_horizon_s: PositiveFloat | None = Field(
+        DEFAULT_GA_HORIZON_S, description="the GA fits the log's first ga_horizon_s [s]; the "
+        "polish then doubles the horizon up to the whole log (null: the whole log at once)")
     ga: ClosedLoopGA = Field(default_factory=ClosedLoopGA)
     polish: bool = Field(True, description="least-squares polish after the GA")
     max_iter: PositiveInt = Field(DEFAULT_MAX_ITER, le=1000,
