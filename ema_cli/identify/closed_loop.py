@@ -123,6 +123,7 @@ def noise_estimate(y: np.ndarray, t: np.ndarray) -> float:
 
 
 SCALE_FLOOR = 1e-4  # a channel's scale is at least this fraction of its range [-]
+NOISE_NOTE = "noise estimate (MAD of second differences / sqrt 6)"  # how an auto scale was chosen
 
 
 def channel_scale(y: np.ndarray, t: np.ndarray) -> tuple[float, str]:
@@ -131,7 +132,7 @@ def channel_scale(y: np.ndarray, t: np.ndarray) -> tuple[float, str]:
     noise = noise_estimate(y, t)
     floor = SCALE_FLOOR * float(np.ptp(y))
     if noise >= floor:
-        return noise, "noise estimate (MAD of second differences / sqrt 6)"
+        return noise, NOISE_NOTE
     return floor, f"{SCALE_FLOOR:g} x range (noise estimate below it)"
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from ema_cli.errors import EmaError
 from ema_cli.identify.closed_loop import (
     CHANNELS,
+    NOISE_NOTE,
     ClosedLoopLog,
     ClosedLoopProblem,
     channel_scale,
@@ -49,6 +50,7 @@ RESTART_MARGIN = 1e-3  # restart the polish when the slice is 0.1 % lower than i
 QUADRATIC_RATIO = 3.0  # the cost 1 SE away must rise 1/3 .. 3 x what J^T J predicts [-]
 HORIZON_GROWTH = 2.0  # continuation: each polish stage fits this many times the last horizon
 HORIZON_MERGE = 1.5  # a stage within this factor of the whole log is the whole log [-]
+NOISE_LEVEL_RATIO = 2.0  # warn when a channel's residual RMS exceeds its noise estimate x this
 
 
 def horizons(duration: float, first: float | None) -> list[float]:
@@ -110,6 +112,22 @@ class ClosedLoopFit:
             out[c] = float(np.sqrt(np.mean(r**2)))
         return out
 
+    def rms_over_scale(self) -> dict[str, float]:
+        """Per channel, the RMS of the weighted residuals: 1 when the fit leaves white noise
+        of the channel's scale, for a scale that is the channel's noise estimate [-]."""
+        n = self.problem.log.n
+        return {c: float(np.sqrt(np.mean(self.residuals[j * n:(j + 1) * n] ** 2)))
+                for j, c in enumerate(self.problem.channels)}
+
+    def fit_quality(self) -> dict[str, Any]:
+        """Whether the fit reaches the noise level of the channels scaled by their noise
+        estimate (``None`` when no channel is): see :data:`NOISE_LEVEL_RATIO`."""
+        ratios = self.rms_over_scale()
+        judged = [c for c in ratios if self.scale_notes[c] == NOISE_NOTE]
+        return {"rms_over_scale": ratios, "limit": NOISE_LEVEL_RATIO,
+                "reaches_noise_level": (all(ratios[c] <= NOISE_LEVEL_RATIO for c in judged)
+                                        if judged else None)}
+
     def to_json(self) -> dict[str, Any]:
         """The content of identification.json."""
         p = self.problem
@@ -145,6 +163,7 @@ class ClosedLoopFit:
             "cost": {"J": self.cost, "J_ga": self.cost_ga, "definition":
                      "sum over channels and samples of ((measured - simulated)/scale)^2"},
             "fit_rms": self.fit_rms(),
+            "fit_quality": self.fit_quality(),
             "all_parameters": full,
             "ga": {"pop": self.settings.ga.pop, "generations": self.settings.ga.generations,
                    "evaluations": None if self.history is None
@@ -357,9 +376,19 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
             + " (see identification.json, parameters.*.not_determined_because)")
     Y = problem.predict(x[None])[0]
     timings["total_s"] = time.perf_counter() - t_start
-    return ClosedLoopFit(settings, problem, ga.x, ga.cost, x, float(r @ r), r, J, unc, Y,
-                         ga.history, notes, grid, slc, prof, nfev, njev, status, restarted,
-                         spans, stages, timings, throughput, warnings, smooth)
+    fit = ClosedLoopFit(settings, problem, ga.x, ga.cost, x, float(r @ r), r, J, unc, Y,
+                        ga.history, notes, grid, slc, prof, nfev, njev, status, restarted,
+                        spans, stages, timings, throughput, warnings, smooth)
+    ratios = fit.rms_over_scale()
+    high = {c: v for c, v in ratios.items()
+            if notes[c] == NOISE_NOTE and v > NOISE_LEVEL_RATIO}
+    if high:
+        warnings.append(
+            "the fit does not reach the noise level: residual RMS " + ", ".join(
+                f"{v:.3g} x the noise estimate of {c}" for c, v in high.items())
+            + ": a local minimum (try other bounds, a larger ga.pop or another ga_horizon_s) "
+            "or a model that cannot explain the log; the standard errors assume neither")
+    return fit
 
 
 def quadratic_check(problem: ClosedLoopProblem, x: np.ndarray, r: np.ndarray, J: np.ndarray,

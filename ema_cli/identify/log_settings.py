@@ -26,7 +26,7 @@ from ema_cli.model.params import check_value
 Scalar = float | int | str
 DEFAULT_DT_S = 1e-5  # fine step: polish, uncertainty, profile (docs/model.md §6) [s]
 DEFAULT_GA_DT_S = 5e-5  # the GA's step (see docs/identification.md for the check) [s]
-DEFAULT_CL_POP = 48  # closed-loop GA population [individuals]
+DEFAULT_CL_POP = 64  # closed-loop GA population: 4 chunks of 16 lanes, 2 per core [individuals]
 DEFAULT_CL_GENERATIONS = 40  # closed-loop GA generations, the initial one included
 DEFAULT_MAX_ITER = 30  # most Jacobian evaluations of the least-squares polish
 DEFAULT_PROFILE_POINTS = 41  # alpha values of the cost profile [points]
