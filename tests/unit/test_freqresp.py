@@ -109,8 +109,8 @@ def test_distortion_grows_with_the_dead_band():
     # limit-cycles at ~19 Hz (33-37 % of the 2 Hz fundamental's amplitude at 0.05 deg, 67-74 %
     # at 0.1 deg, whichever the contact form), not a harmonic: the harmonic distortion then
     # holds only its leakage into the 18 and 20 Hz bins, which depends on how steady the cycle
-    # is (0.05 deg: 5.9 % with the jump contact, 1.65 %
-    # with the damping ramp, below the 1.79 % at 0.01 deg), so it is not a measure to test here
+    # is (0.05 deg: 5.9 % with the jump contact, 1.65 % with the damping ramp, below the
+    # 1.79 % at 0.01 deg), so it is not a measure to test here
     thd = []
     for alpha_deg in (0.0, 0.01, 0.02, 0.05):
         p = resolve({**LINEAR_OVERRIDES, "alpha": alpha_deg * DEG, "fb_motor": 1.0})
