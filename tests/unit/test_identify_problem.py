@@ -137,3 +137,18 @@ def test_standard_errors_cover_the_truth(datasets):
     # for the jump form (contact_tau = 0); the damping ramp (at most (c/tau)*pen, c/tau = 13 kL)
     # also tells alpha from the first samples of every impact: 0.53 at the default tau
     assert 0.4 < res.corr_k_alpha < 0.95
+
+
+def test_the_fit_uses_the_datas_contact_tau(datasets):
+    # synthetic data carry the simulator's contact_tau; a CSV does not (the model default);
+    # the settings' contact_tau overrides either
+    import dataclasses
+
+    from ema_cli.identify.run import build_problem
+    from ema_cli.model.params import CONTACT_TAU
+
+    data = datasets["contact"]
+    assert build_problem(IdentifySettings(), data).tau == data.tau == 1e-4
+    assert build_problem(IdentifySettings(contact_tau=0.0), data).tau == 0.0
+    csv_like = dataclasses.replace(data, tau=None, truth=None)
+    assert build_problem(IdentifySettings(c=0.8), csv_like).tau == CONTACT_TAU
