@@ -10,7 +10,8 @@
    each stage starting from the previous optimum: with backlash the output-error cost of a
    long log is multimodal (the impacts of the simulated and the logged motion fall in or out
    of step), while that of a short log has one wide valley around the truth, so each stage
-   starts inside the basin of the next (docs/identification.md, "Continuation").
+   starts inside the basin of the next (docs/identification.md, "Backlash: a continuous
+   contact and a continuation").
 3. Uncertainty (``identify.uncertainty``): standard errors from the Jacobian at the optimum
    (sandwich with one noise level per channel), Student-t 95 % intervals, correlations and the
    "not determined" flags.

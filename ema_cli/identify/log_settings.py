@@ -78,7 +78,8 @@ class ClosedLoopSettings(Strict):
                                           description="integration step of the GA [s] (null: dt_s)")
     ga_horizon_s: PositiveFloat | None = Field(
         DEFAULT_GA_HORIZON_S, description="the GA fits the log's first ga_horizon_s [s]; the "
-        "polish then doubles the horizon up to the whole log (null: the whole log at once)")
+        "polish then doubles the horizon up to the whole log (null, or polish: false: the "
+        "GA fits the whole log)")
     ga: ClosedLoopGA = Field(default_factory=ClosedLoopGA)
     polish: bool = Field(True, description="least-squares polish after the GA")
     max_iter: PositiveInt = Field(DEFAULT_MAX_ITER, le=1000,
