@@ -13,11 +13,12 @@ log). The cost is the weighted sum of squared output errors::
 
 with ``s_c`` the channel's scale (its noise estimate by default, :func:`noise_estimate`).
 ``evaluate(X[n_pop, n_free])`` simulates the whole population in one batched kernel call
-(``sim.runner.simulate_batch``), the interface the GA (``identify.ga``) minimises.
+(``sim.runner.simulate_batch``), the interface the GA (``optim.ga``) minimises.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -122,6 +123,7 @@ def noise_estimate(y: np.ndarray, t: np.ndarray) -> float:
 
 
 SCALE_FLOOR = 1e-4  # a channel's scale is at least this fraction of its range [-]
+NOISE_NOTE = "noise estimate (MAD of second differences / sqrt 6)"  # how an auto scale was chosen
 
 
 def channel_scale(y: np.ndarray, t: np.ndarray) -> tuple[float, str]:
@@ -130,7 +132,7 @@ def channel_scale(y: np.ndarray, t: np.ndarray) -> tuple[float, str]:
     noise = noise_estimate(y, t)
     floor = SCALE_FLOOR * float(np.ptp(y))
     if noise >= floor:
-        return noise, "noise estimate (MAD of second differences / sqrt 6)"
+        return noise, NOISE_NOTE
     return floor, f"{SCALE_FLOOR:g} x range (noise estimate below it)"
 
 
@@ -258,6 +260,19 @@ class ClosedLoopProblem:
         R = (self.measured[None] - Y) / self.scales[None, :, None]
         J = np.sum(R.reshape(R.shape[0], -1) ** 2, axis=1)
         return np.where(np.isfinite(J), J, np.inf)
+
+    def prefix(self, t_end: float) -> ClosedLoopProblem:
+        """The same problem (free set, bounds, channels, scales, steps) on the log's samples up
+        to ``t_end`` [s] (at least :data:`MIN_LOG_ROWS` of them), with fresh counters."""
+        lg = self.log
+        k = max(int(np.searchsorted(lg.t, t_end * (1.0 + 1e-12), side="right")), MIN_LOG_ROWS)
+        if k >= lg.n:
+            return dataclasses.replace(self, evaluations=0, kernel_steps=0, kernel_s=0.0,
+                                       _refs={})
+        cut = ClosedLoopLog(lg.t[:k], lg.theta_ref[:k], {c: y[:k] for c, y in lg.channels.items()},
+                            lg.source, lg.t0, lg.truth)
+        return dataclasses.replace(self, log=cut, evaluations=0, kernel_steps=0, kernel_s=0.0,
+                                   _refs={})
 
     def groups(self) -> list[slice]:
         """The residual slices of each channel (in ``weighted_residuals``)."""

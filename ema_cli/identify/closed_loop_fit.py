@@ -1,10 +1,17 @@
 """The closed-loop fit: GA (one batched kernel call per generation) -> least-squares polish
 (batched finite-difference Jacobian) -> uncertainty -> cost profile along alpha.
 
-1. GA (``identify.ga``, improved mode) over the bounds at the coarse step ``ga_dt``.
+1. GA (``optim.ga``, improved mode) over the bounds at the coarse step ``ga_dt``, on the
+   first ``ga_horizon_s`` of the log (:func:`horizons`).
 2. ``scipy.optimize.least_squares`` (bounded TRF) on the weighted residuals at the fine step
    ``dt``, in variables scaled to the bounds (u = (x - lo)/(hi - lo)); its Jacobian is a
-   central finite difference whose 2p perturbed parameter sets run in ONE kernel call.
+   central finite difference whose 2p perturbed parameter sets run in ONE kernel call. The
+   polish is continued over growing horizons (the GA's, then doubled, up to the whole log),
+   each stage starting from the previous optimum: with backlash the output-error cost of a
+   long log is multimodal (the impacts of the simulated and the logged motion fall in or out
+   of step), while that of a short log has one wide valley around the truth, so each stage
+   starts inside the basin of the next (docs/identification.md, "Backlash: a continuous
+   contact and a continuation").
 3. Uncertainty (``identify.uncertainty``): standard errors from the Jacobian at the optimum
    (sandwich with one noise level per channel), Student-t 95 % intervals, correlations and the
    "not determined" flags.
@@ -26,6 +33,7 @@ import numpy as np
 from ema_cli.errors import EmaError
 from ema_cli.identify.closed_loop import (
     CHANNELS,
+    NOISE_NOTE,
     ClosedLoopLog,
     ClosedLoopProblem,
     channel_scale,
@@ -41,6 +49,21 @@ FD_REL_STEP = 1e-4  # central-difference step, relative to max(|x|, 1e-3*(hi - l
 POLISH_TOL = 1e-10  # xtol/ftol/gtol of the least-squares polish [-]
 RESTART_MARGIN = 1e-3  # restart the polish when the slice is 0.1 % lower than its optimum [-]
 QUADRATIC_RATIO = 3.0  # the cost 1 SE away must rise 1/3 .. 3 x what J^T J predicts [-]
+HORIZON_GROWTH = 2.0  # continuation: each polish stage fits this many times the last horizon
+HORIZON_MERGE = 1.5  # a stage within this factor of the whole log is the whole log [-]
+NOISE_LEVEL_RATIO = 2.0  # warn when a channel's residual RMS exceeds its noise estimate x this
+
+
+def horizons(duration: float, first: float | None) -> list[float]:
+    """The log horizons [s] of the continuation: ``first``, then doubled while a stage stays
+    :data:`HORIZON_MERGE` x shorter than the log, then the whole ``duration`` (``first``
+    None or not shorter than that: the whole log only). E.g. 4 s with 1 s: [1, 2, 4]."""
+    out: list[float] = []
+    t = first
+    while t is not None and t * HORIZON_MERGE < duration:
+        out.append(float(t))
+        t *= HORIZON_GROWTH
+    return [*out, float(duration)]
 
 
 @dataclass
@@ -66,6 +89,8 @@ class ClosedLoopFit:
     polish_njev: int = 0
     polish_status: str = ""
     restarted: bool = False
+    horizons: list[float] = field(default_factory=list)  # GA's first, polish stages [s]
+    stages: list[dict[str, Any]] = field(default_factory=list)  # per polish stage
     timings: dict[str, float] = field(default_factory=dict)
     ga_throughput: float = 0.0  # kernel steps per second inside the GA [steps/s]
     warnings: list[str] = field(default_factory=list)
@@ -88,6 +113,22 @@ class ClosedLoopFit:
             out[c] = float(np.sqrt(np.mean(r**2)))
         return out
 
+    def rms_over_scale(self) -> dict[str, float]:
+        """Per channel, the RMS of the weighted residuals: 1 when the fit leaves white noise
+        of the channel's scale, for a scale that is the channel's noise estimate [-]."""
+        n = self.problem.log.n
+        return {c: float(np.sqrt(np.mean(self.residuals[j * n:(j + 1) * n] ** 2)))
+                for j, c in enumerate(self.problem.channels)}
+
+    def fit_quality(self) -> dict[str, Any]:
+        """Whether the fit reaches the noise level of the channels scaled by their noise
+        estimate (``None`` when no channel is): see :data:`NOISE_LEVEL_RATIO`."""
+        ratios = self.rms_over_scale()
+        judged = [c for c in ratios if self.scale_notes[c] == NOISE_NOTE]
+        return {"rms_over_scale": ratios, "limit": NOISE_LEVEL_RATIO,
+                "reaches_noise_level": (all(ratios[c] <= NOISE_LEVEL_RATIO for c in judged)
+                                        if judged else None)}
+
     def to_json(self) -> dict[str, Any]:
         """The content of identification.json."""
         p = self.problem
@@ -97,7 +138,7 @@ class ClosedLoopFit:
         full = self.params
         out: dict[str, Any] = {
             "mode": "closed-loop",
-            "method": "output error: GA (identify.ga improved, one batched kernel call per "
+            "method": "output error: GA (optim.ga improved, one batched kernel call per "
                       "generation) at ga_dt, then scipy least_squares (TRF, bounds) at dt "
                       "with a batched central-difference Jacobian",
             "data": {"source": p.log.source, "n_samples": p.log.n,
@@ -123,6 +164,7 @@ class ClosedLoopFit:
             "cost": {"J": self.cost, "J_ga": self.cost_ga, "definition":
                      "sum over channels and samples of ((measured - simulated)/scale)^2"},
             "fit_rms": self.fit_rms(),
+            "fit_quality": self.fit_quality(),
             "all_parameters": full,
             "ga": {"pop": self.settings.ga.pop, "generations": self.settings.ga.generations,
                    "evaluations": None if self.history is None
@@ -132,6 +174,8 @@ class ClosedLoopFit:
             "polish": {"function_evaluations": self.polish_nfev,
                        "jacobian_evaluations": self.polish_njev, "status": self.polish_status,
                        "restarted_from_profile": self.restarted},
+            "continuation": {"ga_horizon_s": self.horizons[0] if self.horizons else None,
+                             "horizons_s": self.horizons, "stages": self.stages},
             "timings_s": self.timings,
             "warnings": self.warnings,
         }
@@ -260,11 +304,14 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
     problem.kernel_steps, problem.kernel_s, problem.evaluations = 0, 0.0, 0
 
     t0 = time.perf_counter()
+    spans = horizons(log.duration, settings.ga_horizon_s if settings.polish else None)
+    ga_problem = problem.prefix(spans[0])
     opts = preset("improved", pop=settings.ga.pop, generations=settings.ga.generations,
                   patience=settings.ga.patience)
-    ga = run_ga(problem, opts, np.random.default_rng(np.random.SeedSequence(settings.seed)))
+    ga = run_ga(ga_problem, opts, np.random.default_rng(np.random.SeedSequence(settings.seed)))
     timings["ga_s"] = time.perf_counter() - t0
-    throughput = problem.kernel_steps / problem.kernel_s if problem.kernel_s > 0 else 0.0
+    throughput = (ga_problem.kernel_steps / ga_problem.kernel_s if ga_problem.kernel_s > 0
+                  else 0.0)
     if not np.isfinite(ga.cost):
         raise EmaError(f"{log.source}: every simulation of the GA diverged; check the bounds "
                        "and the fixed plant parameters", 1)
@@ -273,10 +320,19 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
     nfev = njev = 0
     status = "no polish"
     restarted = False
+    stages: list[dict[str, Any]] = []
     t0 = time.perf_counter()
     if settings.polish:
-        res, njev = polish(problem, x, settings.max_iter)
-        x, nfev, status = res.x, int(res.nfev), str(res.message)
+        for span in spans:  # continuation over growing horizons, the whole log last
+            t1 = time.perf_counter()
+            res, nj = polish(problem.prefix(span), x, settings.max_iter)
+            x, status = res.x, str(res.message)
+            nfev += int(res.nfev)
+            njev += nj
+            stages.append({"horizon_s": span, "function_evaluations": int(res.nfev),
+                           "jacobian_evaluations": nj, "J": float(2.0 * res.cost),
+                           "x": {n: float(v) for n, v in zip(problem.names, x, strict=True)},
+                           "wall_time_s": time.perf_counter() - t1})
     timings["polish_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -321,9 +377,19 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
             + " (see identification.json, parameters.*.not_determined_because)")
     Y = problem.predict(x[None])[0]
     timings["total_s"] = time.perf_counter() - t_start
-    return ClosedLoopFit(settings, problem, ga.x, ga.cost, x, float(r @ r), r, J, unc, Y,
-                         ga.history, notes, grid, slc, prof, nfev, njev, status, restarted,
-                         timings, throughput, warnings, smooth)
+    fit = ClosedLoopFit(settings, problem, ga.x, ga.cost, x, float(r @ r), r, J, unc, Y,
+                        ga.history, notes, grid, slc, prof, nfev, njev, status, restarted,
+                        spans, stages, timings, throughput, warnings, smooth)
+    ratios = fit.rms_over_scale()
+    high = {c: v for c, v in ratios.items()
+            if notes[c] == NOISE_NOTE and v > NOISE_LEVEL_RATIO}
+    if high:
+        warnings.append(
+            "the fit does not reach the noise level: residual RMS " + ", ".join(
+                f"{v:.3g} x the noise estimate of {c}" for c, v in high.items())
+            + ": a local minimum (try other bounds, a larger ga.pop or another ga_horizon_s) "
+            "or a model that cannot explain the log; the standard errors assume neither")
+    return fit
 
 
 def quadratic_check(problem: ClosedLoopProblem, x: np.ndarray, r: np.ndarray, J: np.ndarray,

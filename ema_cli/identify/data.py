@@ -42,6 +42,7 @@ class IdentData:
     damping: str | None = None
     noise_pct: float = 0.0
     noise_std: float = 0.0
+    tau: float | None = None  # the simulator's contact_tau (synthetic data) [s]
 
     @property
     def n_samples(self) -> int:
@@ -57,6 +58,7 @@ class IdentData:
             "max_abs_dtheta_rad": float(np.max(np.abs(self.dth))),
             "torque_rms_nm": float(np.sqrt(np.mean(self.torque**2))),
             "damping_form_of_data": self.damping,
+            "contact_tau_of_data_s": self.tau,
             "noise_pct_of_torque_rms": self.noise_pct,
             "noise_std_nm": self.noise_std,
             "truth": self.truth,
@@ -129,7 +131,7 @@ def synthetic_data(
             f"{damping} damping, noise {noise_pct:g} % of torque RMS")
     return IdentData(df["t_s"].to_numpy(np.float64), df["dtheta_rad"].to_numpy(np.float64),
                      df["domega_rad_s"].to_numpy(np.float64), noisy, desc, truth, damping,
-                     float(noise_pct), std)
+                     float(noise_pct), std, params["contact_tau"])
 
 
 def load_csv(path: str | Path, columns: Mapping[str, str] | None = None) -> IdentData:

@@ -7,9 +7,11 @@ over the alpha range, refined by a bounded Brent search and polished with
 
 * ``paper`` form: ``T = kL*DZ(dth, alpha) + c*dw`` is exactly linear in (kL, c); the closed form
   is the 1- or 2-column normal equations.
-* ``contact`` form: the clamp (the torque never pulls) makes the model piecewise linear. For a
-  fixed alpha we iterate on the active set (samples in contact whose linear torque has the
-  pushing sign): solve the normal equations on the active samples, recompute the set, repeat.
+* ``contact`` form: ``T = kL*DZ + c*clip(dw, -pen/tau, pen/tau)`` in contact (pen = |dth| -
+  alpha; the clipped rate depends on alpha only, so T is still linear in (kL, c)); the clamp
+  (the torque never pulls) makes the model piecewise linear. For a fixed alpha we iterate on
+  the active set (samples in contact whose linear torque has the pushing sign): solve the
+  normal equations on the active samples, recompute the set, repeat.
   The best true J seen is kept; the final ``least_squares`` polish works on the true residuals.
 
 Uncertainty: with residual variance ``s^2 = J/(n - p)`` and residual Jacobian ``A[n, p]`` at the
@@ -27,7 +29,7 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from ema_cli._numba import njit
 from ema_cli.identify.problem import TorqueProblem
-from ema_cli.model.transmission import shaft_torque_nb
+from ema_cli.model.transmission import inverse_tau, shaft_torque_nb
 
 GRID_POINTS = 201  # alpha grid of the profile over the search range [points]
 ACTIVE_SET_ITERS = 30  # contact form: active-set iterations per alpha [-]
@@ -70,7 +72,7 @@ class ExactResult:
 
 
 @njit(cache=True)
-def profile_nb(alphas, dth, dw, tq, c_fixed, fit_c, contact, max_iter, j_out, x_out):
+def profile_nb(alphas, dth, dw, tq, c_fixed, fit_c, contact, inv_tau, max_iter, j_out, x_out):
     """Profile kernel: for each alpha, kL (and c) in closed form -> j_out[G], x_out[G, n_par].
 
     Paper form: one solve of the normal equations. Contact form (alpha > 0): active-set
@@ -95,7 +97,8 @@ def profile_nb(alphas, dth, dw, tq, c_fixed, fit_c, contact, max_iter, j_out, x_
                     z = 0.0
                     if clamp:
                         continue
-                wv = dw[i]
+                lim = (abs(d) - a) * inv_tau
+                wv = min(max(dw[i], -lim), lim) if clamp else dw[i]
                 if clamp and have_prev:
                     lin = kp * z + cp * wv
                     if (d > 0.0 and lin <= 0.0) or (d < 0.0 and lin >= 0.0):
@@ -124,12 +127,14 @@ def profile_nb(alphas, dth, dw, tq, c_fixed, fit_c, contact, max_iter, j_out, x_
             changes = 0
             for i in range(n):
                 d = dth[i]
-                r = tq[i] - shaft_torque_nb(k, a, c, contact, d, dw[i])
+                r = tq[i] - shaft_torque_nb(k, a, c, contact, inv_tau, d, dw[i])
                 jsum += r * r
                 if clamp and have_prev and (d > a or d < -a):
                     z = d - a if d > a else d + a
-                    on_prev = (kp * z + cp * dw[i]) * d > 0.0
-                    on_new = (k * z + c * dw[i]) * d > 0.0
+                    lim = (abs(d) - a) * inv_tau
+                    wv = min(max(dw[i], -lim), lim)
+                    on_prev = (kp * z + cp * wv) * d > 0.0
+                    on_new = (k * z + c * wv) * d > 0.0
                     if on_prev != on_new:
                         changes += 1
             if jsum < best:
@@ -150,7 +155,8 @@ def profile(problem: TorqueProblem, alphas: np.ndarray) -> tuple[np.ndarray, np.
     J = np.empty(alphas.shape[0])
     X = np.empty((alphas.shape[0], len(problem.names)))
     profile_nb(alphas, problem.dth, problem.dw, problem.torque, float(problem.c_fixed),
-               problem.fit_c, problem.form == "contact", ACTIVE_SET_ITERS, J, X)
+               problem.fit_c, problem.form == "contact", inverse_tau(float(problem.tau)),
+               ACTIVE_SET_ITERS, J, X)
     return J, np.where(np.isfinite(J)[:, None], X, np.nan)
 
 
@@ -161,11 +167,18 @@ def _jacobian(problem: TorqueProblem, x: np.ndarray) -> np.ndarray:
     outside = np.abs(d) > p["alpha"]
     dz = np.sign(d) * np.maximum(np.abs(d) - p["alpha"], 0.0)
     if problem.form == "contact" and p["alpha"] > 0.0:
-        lin = p["kL"] * dz + p["c"] * w
+        tau = float(problem.tau)
+        lim = (np.abs(d) - p["alpha"]) / tau if tau > 0.0 else np.full(d.shape, np.inf)
+        wr = np.clip(w, -lim, lim)  # the damped rate (the limit only matters in contact)
+        limited = np.abs(w) > lim  # there d wr / d alpha = -sign(w)/tau
+        lin = p["kL"] * dz + p["c"] * wr
         active = outside & (lin * np.sign(d) > 0.0)
-        cols = [dz * active, -p["kL"] * np.sign(d) * active]
+        d_alpha = -p["kL"] * np.sign(d)
+        if tau > 0.0:
+            d_alpha = d_alpha - p["c"] * np.sign(w) * limited / tau
+        cols = [dz * active, d_alpha * active]
         if problem.fit_c:
-            cols.append(w * active)
+            cols.append(wr * active)
     else:
         cols = [dz, -p["kL"] * np.sign(d) * outside]
         if problem.fit_c:

@@ -26,10 +26,11 @@ from ema_cli.model.params import check_value
 Scalar = float | int | str
 DEFAULT_DT_S = 1e-5  # fine step: polish, uncertainty, profile (docs/model.md §6) [s]
 DEFAULT_GA_DT_S = 5e-5  # the GA's step (see docs/identification.md for the check) [s]
-DEFAULT_CL_POP = 48  # closed-loop GA population [individuals]
+DEFAULT_CL_POP = 64  # closed-loop GA population: 4 chunks of 16 lanes, 2 per core [individuals]
 DEFAULT_CL_GENERATIONS = 40  # closed-loop GA generations, the initial one included
 DEFAULT_MAX_ITER = 30  # most Jacobian evaluations of the least-squares polish
 DEFAULT_PROFILE_POINTS = 41  # alpha values of the cost profile [points]
+DEFAULT_GA_HORIZON_S = 1.0  # the GA fits the log's first second (docs/identification.md) [s]
 MAX_CL_POP = 4096  # the largest closed-loop population [individuals]
 MAX_CL_GENERATIONS = 10_000  # the most closed-loop generations
 MAX_NOISE_PCT = 100.0  # the largest noise of synthetic data [% of the RMS]
@@ -45,7 +46,7 @@ def _check_plant(v: dict[str, Any]) -> dict[str, Any]:
 
 
 class ClosedLoopGA(Strict):
-    """The GA of a closed-loop fit (the improved real-coded GA of ``identify.ga``)."""
+    """The GA of a closed-loop fit (the improved real-coded GA of ``optim.ga``)."""
 
     pop: PositiveInt = Field(DEFAULT_CL_POP, ge=2, le=MAX_CL_POP,
                              description=f"population size, 2 .. {MAX_CL_POP}")
@@ -75,6 +76,10 @@ class ClosedLoopSettings(Strict):
                                                           "the uncertainty [s]")
     ga_dt_s: PositiveFloat | None = Field(DEFAULT_GA_DT_S,
                                           description="integration step of the GA [s] (null: dt_s)")
+    ga_horizon_s: PositiveFloat | None = Field(
+        DEFAULT_GA_HORIZON_S, description="the GA fits the log's first ga_horizon_s [s]; the "
+        "polish then doubles the horizon up to the whole log (null, or polish: false: the "
+        "GA fits the whole log)")
     ga: ClosedLoopGA = Field(default_factory=ClosedLoopGA)
     polish: bool = Field(True, description="least-squares polish after the GA")
     max_iter: PositiveInt = Field(DEFAULT_MAX_ITER, le=1000,

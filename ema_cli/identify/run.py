@@ -28,6 +28,7 @@ from ema_cli.identify.data import (
 from ema_cli.identify.exact import ExactResult, profile, solve_exact
 from ema_cli.identify.problem import PARAM_UNITS, TorqueProblem
 from ema_cli.identify.settings import IdentifySettings
+from ema_cli.model.params import CONTACT_TAU
 from ema_cli.optim.ga import GAHistory, GAOptions, run_ga
 from ema_cli.units import DEG
 
@@ -250,8 +251,10 @@ def build_problem(settings: IdentifySettings, data: IdentData) -> TorqueProblem:
         c_fixed = data.truth["c"]
     else:
         raise EmaError("c is neither fitted nor given: pass --c VALUE or --fit-c")
+    tau = (settings.contact_tau if settings.contact_tau is not None
+           else data.tau if data.tau is not None else CONTACT_TAU)
     return TorqueProblem(data.dth, data.dw, data.torque, settings.model, np.array(lo),
-                         np.array(hi), c_fixed)
+                         np.array(hi), c_fixed, tau)
 
 
 def check_deadband(problem: TorqueProblem, optimum: ExactResult, source: str) -> None:

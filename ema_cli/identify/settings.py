@@ -186,6 +186,9 @@ class IdentifySettings(Strict):
         None, description="fit c too (null: yes for --data, no for synthetic data)")
     c: NonNegFloat | None = Field(
         None, description="fixed c [N*m*s/rad], finite >= 0 (null: simulator's)")
+    contact_tau: NonNegFloat | None = Field(
+        None, description="contact form: damping ramp-in time of the model fitted [s] "
+                          "(null: the synthetic data's, else the model default of `ema params`)")
     data: str | None = Field(None, description="CSV with t_s, dtheta_rad, domega_rad_s, torque_nm")
     columns: dict[str, str] = Field(default_factory=dict,
                                     description="column mapping, canonical name -> file column")

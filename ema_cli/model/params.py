@@ -35,6 +35,7 @@ class Param:
 
 DAMPING_CHOICES = {"contact": 0.0, "paper": 1.0}
 """Transmission damping forms: 0 = contact (T never pulls, 0 inside the gap), 1 = paper Eq. 2."""
+CONTACT_TAU = 1.0e-4  # contact form: damping ramp-in time at impact (docs/model.md §2) [s]
 
 PARAMS: tuple[Param, ...] = (
     # armature and motor
@@ -54,6 +55,8 @@ PARAMS: tuple[Param, ...] = (
     Param("alpha", "rad", 0.0, "half backlash (transmission dead band), load side"),
     Param("damping", "-", 0.0, "transmission damping form: contact | paper",
           choices=DAMPING_CHOICES),
+    Param("contact_tau", "s", CONTACT_TAU, "contact form: damping ramp-in time at impact; "
+          "damping torque limited to (c/tau)*penetration (0: none, the torque jumps)"),
     # controllers
     Param("Kpp", "1/s", 50.0, "position P gain (w*_L = Kpp*e_theta)"),
     Param("Kps", "V*s/rad", 0.15, "speed PI proportional gain (motor side)"),

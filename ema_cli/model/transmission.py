@@ -5,6 +5,8 @@ One function, :func:`shaft_torque_nb`, used by the simulator, the identification
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ema_cli._numba import njit
@@ -14,42 +16,65 @@ FORMS = ("contact", "paper")
 """Damping forms: ``contact`` (the default; T = 0 in the gap and never pulls) or ``paper``."""
 
 
+def inverse_tau(tau: float) -> float:
+    """``1/tau`` [1/s] for :func:`shaft_torque_nb`; ``inf`` for ``tau = 0`` (the jump form)."""
+    return 1.0 / tau if tau > 0.0 else math.inf
+
+
 @njit(cache=True, forceinline=True, error_model="numpy")
-def shaft_torque_nb(kL, alpha, c, contact, dth, dw):
+def shaft_torque_nb(kL, alpha, c, contact, inv_tau, dth, dw):
     """Transmission torque T [N*m, load side] for deflection ``dth`` [rad] and rate ``dw`` [rad/s].
 
     ``dth = theta_m/m - theta_L``, ``dw = w_m/m - w_L`` (load side); ``kL`` [N*m/rad],
-    ``alpha`` half backlash [rad], ``c`` [N*m*s/rad], ``contact`` True for the contact form::
+    ``alpha`` half backlash [rad], ``c`` [N*m*s/rad], ``contact`` True for the contact form,
+    ``inv_tau`` = 1/tau [1/s] of the contact form's damping ramp-in time ``tau``
+    (:func:`inverse_tau`; ``inf``: tau = 0)::
 
         paper form:    T = kL*DZ(dth, alpha) + c*dw                       (paper Eq. 2)
-        contact form:  T = 0 inside the gap (|dth| <= alpha); in contact the Eq. 2 torque,
+        contact form:  T = 0 inside the gap (|dth| <= alpha); in contact, with the penetration
+                       pen = |dth| - alpha > 0,
+                           T = kL*DZ(dth, alpha) + c*clip(dw, -pen/tau, +pen/tau),
                        clamped so that it pushes but never pulls: max(T, 0) if dth > alpha,
                        min(T, 0) if dth < -alpha.
 
-    With ``alpha = 0`` both forms are the permanent-contact shaft ``T = kL*dth + c*dw``.
+    The damping torque is at most ``(c/tau)*pen``: it vanishes at first touch and reaches
+    ``c*dw`` once the penetration exceeds ``|dw|*tau``, i.e. about ``tau`` after an impact at
+    any closing speed (a damper acting through a contact compliance of stiffness c/tau). So
+    the torque is continuous at contact and the trajectory is continuous in the parameters.
+    ``tau = 0`` (``inv_tau = inf``) is the jump form: T jumps by c*dw at contact. With
+    ``alpha = 0`` both forms are the permanent-contact shaft ``T = kL*dth + c*dw`` (no tau).
     Branch-free (selects), so it vectorises.
     """
-    t = kL * dead_zone_nb(dth, alpha) + c * dw
-    clamped = max(t, 0.0) if dth > alpha else (min(t, 0.0) if dth < -alpha else 0.0)
+    spring = kL * dead_zone_nb(dth, alpha)
+    t = spring + c * dw
+    # in contact pen > 0 (dth > alpha implies dth - alpha > 0 in floating point), so with
+    # tau = 0 the limit is pen*inf = inf and the clip returns dw exactly; outside contact the
+    # limit is not used
+    lim = (abs(dth) - alpha) * inv_tau
+    tc = spring + c * min(max(dw, -lim), lim)
+    clamped = max(tc, 0.0) if dth > alpha else (min(tc, 0.0) if dth < -alpha else 0.0)
     return clamped if (contact and alpha > 0.0) else t
 
 
 @njit(cache=True, error_model="numpy")
-def shaft_torque_array_nb(kL, alpha, c, contact, dth, dw, out):
+def shaft_torque_array_nb(kL, alpha, c, contact, inv_tau, dth, dw, out):
     """:func:`shaft_torque_nb` over arrays ``dth[n]``, ``dw[n]`` into ``out[n]`` [N*m]."""
     for i in range(dth.shape[0]):
-        out[i] = shaft_torque_nb(kL, alpha, c, contact, dth[i], dw[i])
+        out[i] = shaft_torque_nb(kL, alpha, c, contact, inv_tau, dth[i], dw[i])
 
 
 def shaft_torque(dth: np.ndarray, dw: np.ndarray, kL: float, alpha: float, c: float,
-                 form: str) -> np.ndarray:
+                 form: str, tau: float = 0.0) -> np.ndarray:
     """Transmission torque [N*m] for arrays of deflection [rad] and rate [rad/s]; ``form`` is
-    ``contact`` or ``paper`` (see :func:`shaft_torque_nb`)."""
+    ``contact`` or ``paper``, ``tau`` [s] the contact form's damping ramp-in time (0: none,
+    the jump form; see :func:`shaft_torque_nb`)."""
     if form not in FORMS:
         raise ValueError(f"form must be one of {FORMS}, got {form!r}")
+    if not tau >= 0.0:
+        raise ValueError(f"tau must be >= 0, got {tau!r}")
     dth = np.ascontiguousarray(dth, dtype=np.float64)
     dw = np.ascontiguousarray(dw, dtype=np.float64)
     out = np.empty_like(dth)
-    shaft_torque_array_nb(float(kL), float(alpha), float(c), form == "contact", dth.ravel(),
-                          dw.ravel(), out.ravel())
+    shaft_torque_array_nb(float(kL), float(alpha), float(c), form == "contact",
+                          inverse_tau(float(tau)), dth.ravel(), dw.ravel(), out.ravel())
     return out

@@ -146,6 +146,9 @@ def closed_loop_summary(fit: ClosedLoopFit) -> str:
         "Correlations: " + "; ".join(
             f"{a}–{b} {fit.uncertainty.corr[i, k]:+.3f}"
             for i, a in enumerate(fit.names) for k, b in enumerate(fit.names) if k > i), "",
+        "Search: GA on the first " + (f"{fit.horizons[0]:g} s" if fit.horizons else "-")
+        + " of the log, least-squares polish over the horizons " + ", ".join(
+            f"{s['horizon_s']:g} s (J {s['J']:.6g})" for s in fit.stages) + ".", "",
         "Timings: " + ", ".join(f"{k} {v:.2f}" for k, v in fit.timings.items())
         + f"; kernel throughput in the GA {fit.ga_throughput / 1e6:.1f} M steps/s.", ""]
     if fit.warnings:

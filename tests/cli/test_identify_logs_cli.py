@@ -25,7 +25,7 @@ def invoke(*args: str):
 def logs(tmp_path_factory):
     d = tmp_path_factory.mktemp("logs")
     r, text = invoke("identify", "--make-data", "closed-loop", "--noise", "1", "--seed", "3",
-                     "--set", "plant.damping=paper", "--set", "duration_s=2", "--out", d / "cl")
+                     "--set", "duration_s=2", "--out", d / "cl")
     assert r.exit_code == 0, text
     r, text = invoke("identify", "--make-data", "friction-sweep", "--noise", "1",
                      "--out", d / "fs")
@@ -40,7 +40,8 @@ def test_make_data_writes_the_log_and_its_truths(logs):
     assert len(df) == 2001 and df["t_s"].iloc[-1] == pytest.approx(2.0)
     side = json.loads((logs / "cl" / "closed_loop.truth.json").read_text())
     assert side["truth"]["kL"] == 590.0 and side["truth"]["alpha"] == 0.003
-    assert side["all_parameters"]["damping"] == 1.0  # paper
+    assert side["all_parameters"]["damping"] == 0.0  # the default contact form
+    assert side["all_parameters"]["contact_tau"] == 1e-4  # with its damping ramp [s]
     assert (logs / "fs" / "friction_sweep.csv").is_file()
     # a finished folder is never overwritten
     r, text = invoke("identify", "--make-data", "friction-sweep", "--out", logs / "fs")
@@ -52,8 +53,8 @@ def test_closed_loop_fit_writes_everything_and_fitted_yaml_runs(logs, tmp_path):
     free = ["--free", "kL=560,620", "--free", "alpha=0.0028,0.0032", "--free", "Fc=0.019,0.021",
             "--free", "sigma2=9e-5,1.1e-4"]
     r, text = invoke("identify", "--closed-loop", "--data", logs / "cl" / "closed_loop.csv",
-                     *free, "--pop", "8", "--generations", "2", "--set", "plant.damping=paper",
-                     "--set", "ga_dt_s=1e-4", "--set", "profile_points=5", "--out", out)
+                     *free, "--pop", "8", "--generations", "2", "--set", "ga_dt_s=1e-4",
+                     "--set", "profile_points=5", "--out", out)
     assert r.exit_code == 0, text
     for name in ("identification.json", "fit_theta_load_deg.png", "fit_current_a.png",
                  "fit_omega_motor_rpm.png", "fit_voltage_cmd_v.png", "alpha_profile.png",

@@ -4,8 +4,9 @@ bounds, the record grid, the batched Jacobian, and fits of synthetic logs agains
 Budget: the fits here use 2 s logs (the chirp 0.5 -> 8 Hz over 2 s), bounds +-5 % around the
 truth and a tiny GA at a coarse step (the polish at dt = 1e-5 s does the work); the 4 s,
 default-budget, full-bounds, 10-seed runs are in ``experiments/bench_identify_logs.py``.
-The data use the `paper` damping form: with the default `contact` form, backlash impacts
-make the cost rugged (docs/identification.md).
+The data and the fits use the model's defaults: the `contact` damping form with its damping
+ramp (``contact_tau`` = 1e-4 s, docs/model.md §2), as ``ema identify --make-data closed-loop``
+and ``--closed-loop`` do without options.
 """
 
 from __future__ import annotations
@@ -15,13 +16,18 @@ import pytest
 
 from ema_cli.errors import EmaError
 from ema_cli.identify.closed_loop import CHANNELS, ClosedLoopLog, check_free, load_log, make_grid
-from ema_cli.identify.closed_loop_fit import build_problem, fd_jacobian, run_closed_loop
+from ema_cli.identify.closed_loop_fit import (
+    build_problem,
+    fd_jacobian,
+    horizons,
+    run_closed_loop,
+)
 from ema_cli.identify.log_settings import ClosedLoopSettings
 from ema_cli.identify.synthetic_logs import closed_loop_log
 from ema_cli.units import DEG
 
 NAMES = ("kL", "alpha", "Fc", "sigma2")
-PLANT = {"damping": "paper"}
+PLANT: dict[str, float] = {}  # the model's defaults
 DURATION_S = 2.0  # test logs [s] (the default is 4 s)
 
 
@@ -56,17 +62,28 @@ def test_the_simulator_at_the_truth_reproduces_the_log(clean):
         assert np.max(np.abs(Y[j] - problem.measured[j])) < 1e-9 * scale, c
 
 
+def _fd_mismatch(problem, x, j, rel):
+    """|forward difference (step rel*x_j) - batched central column| / |column|."""
+    r0, J = fd_jacobian(problem, x)
+    xp = x.copy()
+    xp[j] += rel * x[j]
+    rp = problem.weighted_residuals(xp[None])[0]
+    return np.linalg.norm((rp - r0) / (rel * x[j]) - J[:, j]) / np.linalg.norm(J[:, j])
+
+
 def test_batched_jacobian_matches_one_sided_differences(clean):
     problem, _ = build_problem(ClosedLoopSettings(plant=PLANT), as_log(clean))
     x = np.array([clean.truth[n] for n in problem.names])
-    r0, J = fd_jacobian(problem, x)
     j = problem.names.index("kL")
-    h = 1e-3 * x[j]
-    xp = x.copy()
-    xp[j] += h
-    rp = problem.weighted_residuals(xp[None])[0]
-    # forward difference (error O(h)) vs the central one: agree to ~1 % of the column
-    assert np.linalg.norm((rp - r0) / h - J[:, j]) < 0.01 * np.linalg.norm(J[:, j])
+    # forward difference (step 3e-4 of kL) vs the central one (1e-4): measured 1.6 % of the
+    # column (the paper form: 0.17 %); the contact's kinks (entry, the end of the damping ramp,
+    # the no-pull clamp) leave ~1 % of non-smoothness at this scale, and no more
+    assert _fd_mismatch(problem, x, j, 3e-4) < 0.03
+    # the jump form (contact_tau = 0, the damping torque jumps at each impact) on the same log
+    # is not differentiable at this scale: the two differences disagree by 48 % (measured;
+    # 87 % at 1e-3, 240 % at 3e-5), the reason for the ramp (docs/model.md §2)
+    jump, _ = build_problem(ClosedLoopSettings(plant={"contact_tau": 0.0}), as_log(clean))
+    assert _fd_mismatch(jump, x, j, 3e-4) > 0.3
 
 
 def test_noise_free_log_gives_the_truth(clean):
@@ -74,6 +91,37 @@ def test_noise_free_log_gives_the_truth(clean):
     err = {n: fit.x[j] / clean.truth[n] - 1 for j, n in enumerate(fit.names)}
     assert max(abs(e) for e in err.values()) < 1e-4, err  # issue: 1e-4 relative
     assert fit.to_json()["not_determined"] == []
+
+
+def test_default_fit_of_a_default_log_gives_the_truth():
+    """The issue's noise-free figure with nothing set: a 4 s ``--make-data closed-loop`` log
+    (contact form, backlash 3 mrad) fitted with the default free set, bounds and budget. The
+    GA on the first second and the polish continued over 1, 2, 4 s land on the truth
+    (measured 1e-12 relative, 24 s on 2 cores); the GA on the whole log instead ends in
+    another valley (kL +11 %, alpha +8 %; experiments/bench_identify_logs.py)."""
+    syn = closed_loop_log({}, 0.0, 0)
+    fit = run_closed_loop(ClosedLoopSettings(), as_log(syn))
+    assert fit.horizons == [1.0, 2.0, 4.0]
+    assert [s["horizon_s"] for s in fit.stages] == fit.horizons
+    err = {n: fit.x[j] / syn.truth[n] - 1 for j, n in enumerate(fit.names)}
+    assert max(abs(e) for e in err.values()) < 1e-4, err  # issue: 1e-4 relative
+
+
+def test_continuation_horizons_and_prefix(clean):
+    assert horizons(4.0, 1.0) == [1.0, 2.0, 4.0]
+    assert horizons(4.5, 1.0) == [1.0, 2.0, 4.5]  # 4 s would be within 1.5x of the log
+    assert horizons(2.0, 1.0) == [1.0, 2.0]
+    assert horizons(1.2, 1.0) == [1.2]
+    assert horizons(4.0, None) == [4.0]
+    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT), as_log(clean))
+    part = problem.prefix(0.5)
+    assert part.log.n == 501 and part.log.t[-1] == 0.5
+    assert np.array_equal(part.scales, problem.scales) and part.names == problem.names
+    # the prefix's simulation is the whole log's, cut: same samples where both exist
+    x = np.array([clean.truth[n] for n in problem.names])
+    np.testing.assert_array_equal(part.predict(x[None])[0],
+                                  problem.predict(x[None])[0][:, :501])
+    assert problem.prefix(10.0).log.n == problem.log.n
 
 
 def test_one_percent_noise_within_tolerance_and_covered():
@@ -91,7 +139,26 @@ def test_one_percent_noise_within_tolerance_and_covered():
             covered[n] += js["truth_in_ci95"][n]
         q = js["quadratic_check"]
         assert all(0.5 < q[n] < 2 for n in NAMES), q  # a smooth cost: SEs are meaningful
+        # the residuals are the noise: RMS ~ 1 noise estimate per channel (measured 0.91-1.03;
+        # the current 0.69: its second differences carry the impacts' fast transients too, so
+        # its noise estimate is high)
+        assert js["fit_quality"]["reaches_noise_level"] is True, js["fit_quality"]
+        assert all(0.5 < v < 1.3 for v in js["fit_quality"]["rms_over_scale"].values())
     assert all(v >= 2 for v in covered.values()), covered
+
+
+def test_a_fit_that_misses_the_noise_level_says_so():
+    """A model that cannot explain the log (the load inertia fixed 30 % high): the residuals
+    stay far above the channels' noise estimates, and the tool warns instead of presenting the
+    standard errors as the whole story."""
+    syn = closed_loop_log(PLANT, 1.0, 0, duration_s=DURATION_S)
+    settings = ClosedLoopSettings(plant={**PLANT, "JL": 0.013}, free=narrow(syn.truth),
+                                  ga={"pop": 16, "generations": 3}, ga_dt_s=1e-4,
+                                  profile_points=5)
+    js = run_closed_loop(settings, as_log(syn)).to_json()
+    assert js["fit_quality"]["reaches_noise_level"] is False
+    assert max(js["fit_quality"]["rms_over_scale"].values()) > 2.0
+    assert any("does not reach the noise level" in w for w in js["warnings"]), js["warnings"]
 
 
 def _write(tmp_path, text: str):
@@ -168,6 +235,8 @@ def test_non_uniform_log_is_interpolated(clean):
     x = np.array([clean.truth[n] for n in problem.names])
     Y = problem.predict(x[None])[0]
     for j, c in enumerate(problem.channels):
-        # the two sides differ by the interpolation of a 1 ms log, ~(w*h)^2/8 of a 8 Hz wave
+        # the two sides differ by the interpolation of a 1 ms log, ~(w*h)^2/8 of a 8 Hz wave,
+        # more where the backlash impacts give the current fast transients: measured 0.69 %
+        # (current; 0.40 % in the paper form), <= 0.17 % for the other channels
         rel = np.sqrt(np.mean((Y[j] - problem.measured[j]) ** 2)) / np.ptp(problem.measured[j])
-        assert rel < 5e-3, (c, rel)
+        assert rel < 1e-2, (c, rel)

@@ -27,7 +27,7 @@ def problem(data, form, fit_c=False, torque=None, step=1):
     lo, hi = BOUNDS_C if fit_c else BOUNDS
     tq = data.torque if torque is None else torque
     return TorqueProblem(data.dth[::step], data.dw[::step], tq[::step], form, lo, hi,
-                         data.truth["c"])
+                         data.truth["c"], data.tau)
 
 
 def test_data_exercise_the_gap(datasets):
@@ -42,10 +42,34 @@ def test_model_torque_is_the_simulators_torque(datasets, form):
     # at the true parameters the model reproduces the kernel's _shaft_torque to rounding
     data = datasets[form]
     t = data.truth
-    model = shaft_torque(data.dth, data.dw, t["kL"], t["alpha"], t["c"], form)
+    assert data.tau == 1e-4  # the simulator's default contact_tau [s]
+    model = shaft_torque(data.dth, data.dw, t["kL"], t["alpha"], t["c"], form, data.tau)
     np.testing.assert_allclose(model, data.torque, rtol=0, atol=1e-12)
     prob = problem(data, form)
     assert prob.evaluate(np.array([[t["kL"], t["alpha"]]]))[0] < 1e-20
+    # the ramp acts on contact-form data only: without it the torque differs just after
+    # impacts (the jump form), with or without it the paper form is the same
+    jump = shaft_torque(data.dth, data.dw, t["kL"], t["alpha"], t["c"], form, 0.0)
+    differ = np.abs(jump - data.torque) > 1e-9
+    assert differ.any() if form == "contact" else not differ.any()
+
+
+def test_exact_jacobian_matches_finite_differences(datasets):
+    # the analytic Jacobian of the contact form (the ramp's d/d alpha included) vs central
+    # differences of the residuals, at a point off the optimum where samples are ramping
+    from ema_cli.identify.exact import _jacobian
+
+    data = datasets["contact"]
+    prob = problem(data, "contact", True)
+    x = np.array([600.0, 0.00302, 0.7])
+    A = _jacobian(prob, x)
+    for j, h in enumerate((1e-3, 1e-10, 1e-6)):
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        fd = (prob.residuals(xp) - prob.residuals(xm)) / (2 * h)
+        # kinks (contact entry, the clamp, the ramp's end) make a few samples differ
+        assert np.linalg.norm(fd - A[:, j]) < 1e-3 * np.linalg.norm(A[:, j]), j
 
 
 @pytest.mark.parametrize("form", ["contact", "paper"])
@@ -109,5 +133,22 @@ def test_standard_errors_cover_the_truth(datasets):
     res = solve_exact(problem(data, "contact", torque=noisy))
     z = (res.x - [data.truth["kL"], data.truth["alpha"]]) / res.se
     assert np.all(np.abs(z) < 4.0)
-    # kL and alpha trade off (a stiffer spring with a wider gap): strong positive correlation
-    assert 0.6 < res.corr_k_alpha < 0.95
+    # kL and alpha trade off (a stiffer spring with a wider gap): positive correlation, 0.80
+    # for the jump form (contact_tau = 0); the damping ramp (at most (c/tau)*pen, c/tau = 13 kL)
+    # also tells alpha from the first samples of every impact: 0.53 at the default tau
+    assert 0.4 < res.corr_k_alpha < 0.95
+
+
+def test_the_fit_uses_the_datas_contact_tau(datasets):
+    # synthetic data carry the simulator's contact_tau; a CSV does not (the model default);
+    # the settings' contact_tau overrides either
+    import dataclasses
+
+    from ema_cli.identify.run import build_problem
+    from ema_cli.model.params import CONTACT_TAU
+
+    data = datasets["contact"]
+    assert build_problem(IdentifySettings(), data).tau == data.tau == 1e-4
+    assert build_problem(IdentifySettings(contact_tau=0.0), data).tau == 0.0
+    csv_like = dataclasses.replace(data, tau=None, truth=None)
+    assert build_problem(IdentifySettings(c=0.8), csv_like).tau == CONTACT_TAU

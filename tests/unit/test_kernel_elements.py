@@ -13,7 +13,7 @@ from ema_cli.model.elements import quantize_nb
 from ema_cli.model.elements import saturate_nb as _sat
 from ema_cli.model.lugre import bristle_step_nb, steady_friction_nb
 from ema_cli.model.params import INDEX, resolve, to_row
-from ema_cli.model.transmission import shaft_torque, shaft_torque_nb
+from ema_cli.model.transmission import inverse_tau, shaft_torque, shaft_torque_nb
 
 
 def row(**over) -> np.ndarray:
@@ -22,7 +22,8 @@ def row(**over) -> np.ndarray:
 
 def _shaft_torque(p, dth, dw):
     return shaft_torque_nb(p[INDEX["kL"]], p[INDEX["alpha"]], p[INDEX["c"]],
-                           p[INDEX["damping"]] == 0.0, dth, dw)
+                           p[INDEX["damping"]] == 0.0, inverse_tau(p[INDEX["contact_tau"]]),
+                           dth, dw)
 
 
 def _bristle_step(p, z, w, dt):
@@ -44,10 +45,11 @@ def test_array_torque_equals_scalar_torque():
     rng = np.random.default_rng(3)
     dth, dw = rng.normal(0, 0.005, 500), rng.normal(0, 1.0, 500)
     for form in ("contact", "paper"):
-        arr = shaft_torque(dth, dw, 590.0, 0.003, 0.8, form)
-        ref = [shaft_torque_nb(590.0, 0.003, 0.8, form == "contact", a, b)
-               for a, b in zip(dth, dw, strict=True)]
-        assert np.array_equal(arr, np.array(ref))
+        for tau in (0.0, 1e-4):
+            arr = shaft_torque(dth, dw, 590.0, 0.003, 0.8, form, tau)
+            ref = [shaft_torque_nb(590.0, 0.003, 0.8, form == "contact", inverse_tau(tau), a, b)
+                   for a, b in zip(dth, dw, strict=True)]
+            assert np.array_equal(arr, np.array(ref))
 
 
 @pytest.mark.parametrize(("u", "d", "expected"), [
