@@ -11,7 +11,7 @@ confidence intervals over the base samples as ``SALib.analyze.sobol.analyze`` co
 (``*_conf``: ``z * std(ddof=1)`` of the estimates over the resamples, a half-width at
 ``conf_level``). :func:`sobol_estimates` evaluates the estimators for every resample at once from
 its draw counts (one matrix product), so thousands of resamples cost about a second at N = 4096,
-where SALib's indexed copies take minutes; given the same resamples it gives SALib's numbers
+where SALib's indexed copies take tens of seconds; given the same resamples it gives SALib's numbers
 (checked in the tests), though it draws its resamples in another order than SALib, so the
 half-widths of one seed differ from SALib's by the bootstrap's own scatter. That scatter is
 not small: a half-width is itself a Monte Carlo estimate, scattering by about 3-5 % (relative)
