@@ -204,8 +204,8 @@ def analyse(run: InputRun, design: Design, cfg: SensitivityConfig) -> None:
             why += " (log10 needs values > 0)"
         if why is None:
             table = indices(design, y, s.conf_level, s.num_resamples, cfg.seed)
-            conv.append(convergence(design, y, s.conf_level, s.num_resamples,
-                                    cfg.seed).assign(metric=metric))
+            conv.append(convergence(design, y, s.conf_level, s.num_resamples, cfg.seed,
+                                    full=table).assign(metric=metric))
         else:
             table = empty_table(design)
             run.notes.append(f"{metric}: not analysed: {why}")

@@ -13,14 +13,22 @@ import itertools
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from ema_cli.errors import EmaError
+from ema_cli.sensitivity import analyze
 from ema_cli.sensitivity.analyze import (
+    analysis_seed,
     convergence,
     indices,
     prefix_sizes,
     ranking,
+    resample_counts,
+    sobol_blocks,
+    sobol_conf_asymptotic,
+    sobol_estimates,
+    sobol_indices,
     spearman,
 )
 from ema_cli.sensitivity.sampling import FactorRange, sample
@@ -117,6 +125,8 @@ def test_convergence_ends_at_the_full_design():
     last = conv[conv["n"] == 256].reset_index(drop=True)
     full = indices(design, y, seed=0)
     np.testing.assert_allclose(last[["S1", "ST", "ST_conf"]], full[["S1", "ST", "ST_conf"]])
+    reused = convergence(design, y, seed=0, full=full)  # the full design's table reused
+    pd.testing.assert_frame_equal(reused, conv)
 
 
 def test_factor_ranges_map_the_unit_interval():
@@ -152,3 +162,59 @@ def test_same_seed_same_indices():
     np.testing.assert_array_equal(t1[["S1", "S1_conf", "ST", "ST_conf"]],
                                   t2[["S1", "S1_conf", "ST", "ST_conf"]])
     assert spearman(np.array([3.0, 1, 2]), np.array([30.0, 5, 20])) == pytest.approx(1.0)
+
+
+def test_sobol_estimates_and_bootstrap_are_salibs():
+    """The indices are SALib's (sobol.analyze); the bootstrap, given SALib's resamples (its
+    index matrix r[n, num_resamples] of the same seed) as draw counts, gives SALib's
+    half-widths."""
+    from SALib.analyze import sobol
+
+    from ema_cli.sensitivity.sampling import problem
+
+    design = sample(ISHIGAMI, "sobol", 256, seed=2)
+    y = ishigami(design.values)
+    seed, nr, n = analysis_seed(4), 300, 256
+    ref = sobol.analyze(problem(ISHIGAMI), y, calc_second_order=False, num_resamples=nr,
+                        seed=seed)
+    table = indices(design, y, num_resamples=nr, seed=4)
+    np.testing.assert_allclose(table["S1"], ref["S1"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(table["ST"], ref["ST"], rtol=0, atol=1e-12)
+    r = np.random.default_rng(seed).integers(n, size=(n, nr))  # SALib's draws
+    counts = np.stack([np.bincount(r[:, k], minlength=n) for k in range(nr)]).astype(float)
+    s1, st = sobol_estimates(*sobol_blocks(y, 3), counts)
+    z = 1.959963984540054
+    np.testing.assert_allclose(z * s1.std(axis=0, ddof=1), ref["S1_conf"], rtol=1e-10)
+    np.testing.assert_allclose(z * st.std(axis=0, ddof=1), ref["ST_conf"], rtol=1e-10)
+    # our own draws are other resamples of the same bootstrap: the same half-widths up to the
+    # bootstrap's scatter (about 1/sqrt(2*300) = 4 % each)
+    np.testing.assert_allclose(table["ST_conf"], ref["ST_conf"], rtol=0.2)
+
+
+def test_resample_counts_draw_n_of_n_in_blocks(monkeypatch):
+    monkeypatch.setattr(analyze, "BOOTSTRAP_BLOCK", 64 * 10)  # 10 resamples of 64 per block
+    blocks = list(resample_counts(64, 25, seed=3))
+    assert [b.shape for b in blocks] == [(10, 64), (10, 64), (5, 64)]
+    counts = np.concatenate(blocks)
+    assert np.all(counts.sum(axis=1) == 64) and counts.min() >= 0
+    np.testing.assert_array_equal(counts, np.concatenate(list(resample_counts(64, 25, seed=3))))
+    # each base sample is drawn once per resample on average
+    assert abs(counts.mean() - 1.0) < 1e-12 and 0.8 < counts.var() < 1.2
+
+
+def test_bootstrap_half_widths_approach_the_asymptotic_ones():
+    """With many resamples the bootstrap half-widths are the delta-method ones (the limit
+    they approach) within their own scatter (about 1/sqrt(2*4000) = 1.1 %, 5 % allowed);
+    at 200 resamples they scatter by several per cent between seeds."""
+    design = sample(ISHIGAMI, "sobol", 2048, seed=1)
+    y = ishigami(design.values)
+    s1, s1_conf, st, st_conf = sobol_indices(y, 3, 0.95, 4000, seed=7)
+    a_s1, a_st = sobol_conf_asymptotic(y, 3, 0.95)
+    np.testing.assert_allclose(s1_conf, a_s1, rtol=0.05)
+    np.testing.assert_allclose(st_conf, a_st, rtol=0.05)
+    few = np.array([sobol_indices(y, 3, 0.95, 200, seed=k)[3] for k in range(8)])
+    spread = few.std(axis=0, ddof=1) / few.mean(axis=0)
+    assert np.all((spread > 0.01) & (spread < 0.15))
+    # half-widths scale with the z of the confidence level
+    _, a90 = sobol_conf_asymptotic(y, 3, 0.90)
+    np.testing.assert_allclose(a90 / a_st, 1.6448536269514722 / 1.959963984540054)
