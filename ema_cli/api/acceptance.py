@@ -99,12 +99,6 @@ class AcceptanceResult:
         return out
 
 
-def _actuator_pairs(spec: AcceptanceSpec) -> list[tuple[str, Any]]:
-    act = spec.actuator
-    return ([(f"plant.{k}", v) for k, v in act.plant.items()]
-            + [(f"nonlinearities.{k}", v) for k, v in act.nonlinearities.items()])
-
-
 def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
                only: Sequence[str] | None = None,
                progress: Callable[[TestRun], None] | None = None) -> AcceptanceResult:
@@ -129,17 +123,8 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
             raise EmaError(f"--only: no test {unknown[0]!r} in the spec; tests: "
                            f"{', '.join(names)}")
         names = [n for n in names if n in set(only)]
-    here = base_dir(spec)
-    act_source: Any = None
-    act_dir = here
-    if sp.actuator.config is not None:
-        act_source = (here / sp.actuator.config) if here is not None else Path(
-            sp.actuator.config)
-        if not act_source.is_file():
-            raise EmaError(f"actuator.config: '{sp.actuator.config}' is not a file (a run "
-                           "config, relative to the spec)")
-        act_dir = act_source.parent
-    base_pairs = _actuator_pairs(sp)
+    act_source, act_dir = sp.actuator.source(base_dir(spec), "spec")
+    base_pairs = sp.actuator.pairs()
 
     def resolved(extra: list[tuple[str, Any]], where: str) -> tuple[dict[str, float], float]:
         try:

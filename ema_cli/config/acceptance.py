@@ -24,12 +24,14 @@ no_load_rate        rate (rate)
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from ema_cli.config.base import FiniteFloat, PlainName, PositiveFloat, PositiveInt, Strict
 from ema_cli.config.run import KEY_MARK, Scalar
+from ema_cli.errors import EmaError
 from ema_cli.units import SI_UNIT, UNITS, units_of
 
 METRICS: dict[str, dict[str, str]] = {
@@ -263,6 +265,23 @@ class ActuatorSpec(Strict):
                                                  "off removes a saturation)")
     nonlinearities: dict[str, Any] = Field(
         default_factory=dict, description="name -> magnitude (`ema locations`)")
+
+    def pairs(self) -> list[tuple[str, Any]]:
+        """The overrides as dotted run-config paths (``plant.X``, ``nonlinearities.X``)."""
+        return ([(f"plant.{k}", v) for k, v in self.plant.items()]
+                + [(f"nonlinearities.{k}", v) for k, v in self.nonlinearities.items()])
+
+    def source(self, here: Path | None, owner: str) -> tuple[Path | None, Path | None]:
+        """(the run config file or None for the defaults, the folder its relative paths are
+        read from); ``here`` the folder of the ``owner`` file that names it. Raises EmaError
+        when the file does not exist."""
+        if self.config is None:
+            return None, here
+        src = (here / self.config) if here is not None else Path(self.config)
+        if not src.is_file():
+            raise EmaError(f"actuator.config: '{self.config}' is not a file (a run config, "
+                           f"relative to the {owner})")
+        return src, src.parent
 
 
 class AcceptanceSpec(Strict):

@@ -101,8 +101,7 @@ def scenario_document(cfg: TuneConfig, name: str, actuator: Mapping[str, Any],
     sets = [(k, v) for k, v in dotted_pairs(sc.overrides)
             if compensators or not k.startswith("controller.")]
     pairs: list[tuple[str, Any]] = (
-        [(f"plant.{k}", v) for k, v in cfg.actuator.plant.items()]
-        + [(f"nonlinearities.{k}", v) for k, v in cfg.actuator.nonlinearities.items()]
+        cfg.actuator.pairs()
         + [(f"nonlinearities.{k}", v) for k, v in sc.nonlinearities.items()]
         + [(f"plant.{k}", v) for k, v in plant.items()]
         + sets
@@ -124,24 +123,13 @@ def scenario_document(cfg: TuneConfig, name: str, actuator: Mapping[str, Any],
 def build_scenarios(cfg: TuneConfig, base_dir: Path | None
                     ) -> tuple[list[Scenario], dict[str, Any]]:
     """Resolve every scenario of ``cfg`` -> (scenarios, the actuator's run config document)."""
-    act_data: dict[str, Any] = {}
-    act_dir = base_dir
-    if cfg.actuator.config is not None:
-        src = (base_dir / cfg.actuator.config) if base_dir is not None else Path(
-            cfg.actuator.config)
-        if not src.is_file():
-            raise EmaError(f"actuator.config: '{cfg.actuator.config}' is not a file (a run "
-                           "config, relative to the tuning config)")
-        act_data = read_yaml(src)
-        act_dir = src.parent
+    src, act_dir = cfg.actuator.source(base_dir, "tuning config")
+    act_data: dict[str, Any] = read_yaml(src) if src is not None else {}
     try:
-        act_doc = {k: v for k, v in act_data.items() if k in RUN_KEYS}
-        act_pairs = ([(f"plant.{k}", v) for k, v in cfg.actuator.plant.items()]
-                     + [(f"nonlinearities.{k}", v)
-                        for k, v in cfg.actuator.nonlinearities.items()])
         from ema_cli.config.loader import apply_overrides
 
-        act_full = apply_overrides(act_doc, act_pairs, RUN_KEYS)
+        act_doc = {k: v for k, v in act_data.items() if k in RUN_KEYS}
+        act_full = apply_overrides(act_doc, cfg.actuator.pairs(), RUN_KEYS)
         resolve_run(load_config(act_full, [], RunConfig), act_dir)
     except EmaError as exc:
         raise EmaError(f"actuator: {exc}") from None
@@ -210,6 +198,7 @@ class TuneProblem:
         self.n_steps = int(round(cfg.simulation.duration_s / self.dt))
         self.refs = [s.signal for s in self.scenarios]
         self.base = np.array([to_row(s.params) for s in self.scenarios])
+        self.reference_base = np.array([to_row(s.reference) for s in self.scenarios])
         self.weights = np.array([s.weight for s in self.scenarios])
         self.limits = [{k: lim.si() for k, lim in cfg.constraints_of(s.name).items()}
                        for s in self.scenarios]
@@ -221,9 +210,7 @@ class TuneProblem:
         self._margin_cache: dict[tuple[float, ...], tuple[float, float, bool]] = {}
         self.reference_metric = np.ones(len(self.scenarios))
         if cfg.cost.normalise:
-            ref = self.simulate(np.array([to_row(s.reference) for s in self.scenarios]),
-                                np.arange(len(self.scenarios)))
-            self.reference_batch = ref
+            ref = self.simulate(self.reference_base, np.arange(len(self.scenarios)))
             vals = ref.metrics[:, self.metric_col]
             for s, v in zip(self.scenarios, vals, strict=True):
                 if not (math.isfinite(v) and v > 0):
@@ -245,11 +232,12 @@ class TuneProblem:
         return np.column_stack([[spec.to_unit(float(x)) for x in X[:, k]]
                                 for k, spec in enumerate(self.specs)])
 
-    def rows(self, X: np.ndarray) -> np.ndarray:
+    def rows(self, X: np.ndarray, base: np.ndarray | None = None) -> np.ndarray:
         """Kernel rows of candidates ``X[n, n_var]`` on every scenario: ``[n*n_scen, N]``,
-        candidate-major (row ``c*n_scen + s``)."""
+        candidate-major (row ``c*n_scen + s``), on the scenario rows ``base`` (default: the
+        scenarios as configured)."""
         n, n_s = X.shape[0], len(self.scenarios)
-        P = np.repeat(self.base[None], n, axis=0)  # [n, n_s, N]
+        P = np.repeat((self.base if base is None else base)[None], n, axis=0)  # [n, n_s, N]
         P[:, :, self.cols] = X[:, None, :]
         return P.reshape(n * n_s, -1)
 
@@ -279,11 +267,12 @@ class TuneProblem:
         self._margin_cache[key] = out
         return out
 
-    def score(self, X: np.ndarray, dec: int = 0) -> Evaluation:
-        """Simulate and score candidates ``X[n, n_var]`` (values, SI)."""
+    def score(self, X: np.ndarray, dec: int = 0, base: np.ndarray | None = None) -> Evaluation:
+        """Simulate and score candidates ``X[n, n_var]`` (values, SI) on the scenario rows
+        ``base`` (default: the scenarios as configured)."""
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         n, n_s = X.shape[0], len(self.scenarios)
-        P = self.rows(X)
+        P = self.rows(X, base)
         res = self.simulate(P, np.tile(np.arange(n_s), n), dec)
         met = res.metrics.reshape(n, n_s, -1)
         metric = met[:, :, self.metric_col]

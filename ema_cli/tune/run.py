@@ -156,7 +156,9 @@ def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = 
     initial = np.array([scenarios[0].params[v] for v in problem.variables])
     before = problem.score(initial[None], dec)
     after = problem.score(best.x[None], dec)
-    ref = _reference(problem, dec)
+    # the default controller, scored like a candidate (its variables at the actuator's values)
+    ref = problem.score(problem.reference_base[0, problem.cols][None], dec,
+                        problem.reference_base)
     # convergence check: the tuned controller on half the step
     check_dt = cfg.simulation.dt_s * CHECK_DT_FACTOR
     check = TuneProblem(cfg.model_copy(update={"simulation": cfg.simulation.model_copy(
@@ -166,21 +168,3 @@ def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = 
                "evaluations": float(sum(r.result.evaluations for r in records))}
     return TuneOutcome(cfg, problem, method, records, best, ref, before, after, initial,
                        check_dt, check_cost, time.perf_counter() - t0, timings)
-
-
-def _reference(problem: TuneProblem, dec: int) -> Evaluation:
-    """The default controller on every scenario, scored like a candidate (the variables at
-    the actuator's values and the scenario compensators removed)."""
-    saved = problem.base
-    try:
-        problem.base = np.array([_row(s.reference) for s in problem.scenarios])
-        x = problem.base[0, problem.cols]
-        return problem.score(x[None], dec)
-    finally:
-        problem.base = saved
-
-
-def _row(params: dict[str, float]) -> np.ndarray:
-    from ema_cli.model.params import to_row
-
-    return np.array(to_row(params))
