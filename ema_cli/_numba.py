@@ -80,7 +80,7 @@ def _prepare(root: Path, key: str) -> Path:
 CACHE_KEY = source_key()
 """The key of the sources this process runs; the compiled code is cached under it."""
 
-from numba import config, njit, prange  # noqa: E402  (after the key: config must be set first)
+from numba import config, literally, njit, prange  # noqa: E402  (after the key: config must be set first)
 
 config.CACHE_DIR = str(_prepare(cache_root(), CACHE_KEY))
 
@@ -119,4 +119,4 @@ def _defer_blas_probe() -> None:
 
 _defer_blas_probe()
 
-__all__ = ["CACHE_KEY", "njit", "prange", "source_key"]
+__all__ = ["CACHE_KEY", "literally", "njit", "prange", "source_key"]

@@ -10,9 +10,14 @@ A batch ``P[n_cases, N_PARAMS]`` (columns: ``model.params.PARAMS``) is cut into 
 accumulators are held as ``[quantity, lane]`` arrays (structure of arrays, the lane axis
 innermost) and every time step is one loop over the lanes whose body is branch-free (selects,
 ``min``/``max``, the ``model.vmath`` functions), so the compiler vectorises it (AVX-512: 8 lanes
-per instruction). Chunks are spread over the cores with ``prange``. One configuration is a chunk
-of one lane: the same code, so a batch equals its single runs bit for bit, and the serial and the
-parallel entry points give identical results (no fast-math, no reassociation).
+per instruction). Chunks are spread over the cores with ``prange``. The time loop of a chunk
+is compiled once per kernel variant (:func:`_variant`: with or without friction, with the
+default Stribeck exponent 1 or any other, with or without the digital controller, quantisers,
+locked motor and compensators), each a function of its own that carries only what its lanes
+need; the rows of a batch are sorted by variant (:func:`variant_order`) so chunks rarely mix.
+One configuration is a chunk of one lane: the same code, so a batch equals its single runs bit
+for bit, and the serial and the parallel entry points give identical results (no fast-math, no
+reassociation).
 
 Numerics
 --------
@@ -47,7 +52,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ema_cli._numba import njit, prange
+from ema_cli._numba import literally, njit, prange
 from ema_cli.model.controller import (
     cascade_nb,
     deadzone_inverse_nb,
@@ -285,15 +290,16 @@ def _record(W, j, x, inp, out, m):
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
-def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extras):
+def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     """One time step of one lane: metrics at t_k, then RK4 to t_k+1 (a pure function).
 
     x = (theta_m, w_m, i, theta_L, w_L, z, xI); acc = the 22 metric accumulators (row order of
     ``_A_*``); ctl = (sample countdown, held voltage, alive, step where it diverged); inp =
     (reference at t, t+dt/2, t+dt, its velocity at t, load profile at t, t+dt/2, t+dt); lp =
-    :func:`_lane_params`. ``fric_chunk`` False skips the LuGre update (no lane has friction);
-    ``extras`` False skips the digital controller, the quantisers and the locked motor (none is
-    in use); both are constants at each call site, so a variant carries only what it needs.
+    :func:`_lane_params`. ``fric`` (:func:`_variant`) 0 skips the LuGre update (no lane has
+    friction), 1 takes the Stribeck exponent as 1; ``extras`` False skips the digital
+    controller, the quantisers, the locked motor and the compensators (none is in use); both are
+    constants at each call site, so a variant carries only what it needs.
     Returns (x+, acc+, ctl+, (u_dem, u_amp, T, Tf, T_load) at t_k).
     """
     (m, inv_m, _, _, _, _, _, _, _, _, kl, alpha, c, contact, kpp, kps, kis, sat1, sat2, sat3,
@@ -313,7 +319,9 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric_chunk, extra
     t = k * dt
     wgt = 0.5 * dt if (k == 0 or k == n_steps) else dt
     # --- LuGre bristle step (exact for frozen w_m), held over the RK4 stages
-    if fric_chunk:
+    if fric == 1:
+        delta = 1.0  # every lane's exponent (a constant here: pow_nb folds to its argument)
+    if fric > 0:
         zb, tb = bristle_step_nb(z, w_m, dt, fc, fs, vs, delta, sig0, sig1)
         z_new = zb if fr else 0.0
         tf_b = tb if fr else 0.0
@@ -437,16 +445,33 @@ def _advance(W, k, dt, n_steps, in_ss, in_osc, record, fric_chunk, extras):
 
 @njit(cache=True, forceinline=True, error_model="numpy")
 def _variant(W):
-    """(any lane of ``W`` has friction, any lane uses the digital controller, a quantiser or
-    the locked motor): the kernel variant its steps need."""
-    fric_chunk = False
+    """The kernel variant the lanes of ``W`` need: (friction mode, extras). The friction mode is
+    0 when no lane has friction, 1 when some lane has and every lane's Stribeck exponent is 1
+    (the model's default: ``|w/vs|**delta`` is then ``|w/vs|``, no log and exp), else 2;
+    extras is True when some lane uses the digital controller, a quantiser, the locked motor
+    or a compensator."""
+    fric = False
+    unit = True
     extras = False
     for j in range(W.shape[1]):
-        fric_chunk = fric_chunk or W[_FRIC, j] != 0.0
+        fric = fric or W[_FRIC, j] != 0.0
+        unit = unit and W[_DELTA, j] == 1.0
         extras = extras or (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
                             or W[_LOCKED, j] != 0.0 or W[_DZI, j] > 0.0 or W[_FFC, j] > 0.0
                             or W[_FFS2, j] > 0.0 or W[_NHZ, j] > 0.0 or W[_FFSIG0, j] > 0.0)
-    return fric_chunk, extras
+    return (0 if not fric else (1 if unit else 2)), extras
+
+
+def variant_order(P: np.ndarray) -> np.ndarray:
+    """The rows of ``P[n_cases, N_PARAMS]`` sorted (stably) by the kernel variant they need
+    (:func:`_variant`, cheapest first), so that a chunk of lanes rarely mixes variants and
+    pays for the costlier one: the permutation ``order`` (run ``P[order]``)."""
+    fric = P[:, _FRIC] != 0.0
+    general = fric & (P[:, _DELTA] != 1.0)
+    extras = ((P[:, _TS] > 0.0) | (P[:, _QPOS] > 0.0) | (P[:, _QSPEED] > 0.0)
+              | (P[:, _LOCKED] != 0.0) | (P[:, _DZI] > 0.0) | (P[:, _FFC] > 0.0)
+              | (P[:, _FFS2] > 0.0) | (P[:, _NHZ] > 0.0) | (P[:, _FFSIG0] > 0.0))
+    return np.argsort(3 * extras.astype(np.int64) + fric + general, kind="stable")
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -492,18 +517,15 @@ def _init(W, n_real, step_info, qidx, dt, n_steps):
     return _variant(W)
 
 
-@njit(cache=True, forceinline=True, error_model="numpy")
-def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, k0, k1, dec, sig,
-         rows, met):
-    """Advance the lanes of the work array ``W`` together over steps ``k0..k1-1`` (the first
-    ``n_real`` are real, the rest padding copies of lane 0): initialise ``W`` when ``k0`` is 0,
-    record the signals of lane ``j`` into ``sig[rows[j]]`` and, when the run ends here, write its
-    metrics into ``met[rows[j]]``."""
+@njit(cache=True, error_model="numpy")
+def _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig, rows,
+           fric, extras):
+    """Advance the lanes of ``W`` over steps ``k0..k1-1`` (see :func:`_run`) in the kernel
+    variant (``fric``, ``extras``) of :func:`_variant`: compiled once per variant, each a
+    function of its own, so the optimiser sees (and lays out) one variant at a time."""
+    literally(fric)
+    literally(extras)
     nl = W.shape[1]
-    if k0 == 0:
-        fric_chunk, extras = _init(W, n_real, step_info, qidx, dt, n_steps)
-    else:
-        fric_chunk, extras = _variant(W)
     k_ss = int(np.ceil(SS_FRACTION * n_steps - 1e-9))
     k_osc = int(np.ceil(OSC_FRACTION * n_steps - 1e-9))
     has_load = load_half.shape[1] > 0
@@ -529,16 +551,7 @@ def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, k
                 W[_U_L1, j] = load_half[q, nxt]
                 W[_U_L2, j] = load_half[q, nxt2]
         record = dec > 0 and countdown == 0
-        in_ss = k >= k_ss
-        in_osc = k >= k_osc
-        if fric_chunk and extras:
-            _advance(W, k, dt, n_steps, in_ss, in_osc, record, True, True)
-        elif fric_chunk:
-            _advance(W, k, dt, n_steps, in_ss, in_osc, record, True, False)
-        elif extras:
-            _advance(W, k, dt, n_steps, in_ss, in_osc, record, False, True)
-        else:
-            _advance(W, k, dt, n_steps, in_ss, in_osc, record, False, False)
+        _advance(W, k, dt, n_steps, k >= k_ss, k >= k_osc, record, fric, extras)
         if record:
             countdown = dec
             row = k // dec
@@ -553,8 +566,41 @@ def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, k
                 n_alive += W[_D_ALIVE, j] != 0.0
             if n_alive == 0:
                 break  # every lane diverged: the rest of the record stays NaN
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, k0, k1, dec, sig,
+         rows, met):
+    """Advance the lanes of the work array ``W`` together over steps ``k0..k1-1`` (the first
+    ``n_real`` are real, the rest padding copies of lane 0): initialise ``W`` when ``k0`` is 0,
+    record the signals of lane ``j`` into ``sig[rows[j]]`` and, when the run ends here, write its
+    metrics into ``met[rows[j]]``."""
+    if k0 == 0:
+        fric, extras = _init(W, n_real, step_info, qidx, dt, n_steps)
+    else:
+        fric, extras = _variant(W)
+    if extras:
+        if fric == 0:
+            _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
+                   rows, 0, True)
+        elif fric == 1:
+            _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
+                   rows, 1, True)
+        else:
+            _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
+                   rows, 2, True)
+    elif fric == 0:
+        _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
+               rows, 0, False)
+    elif fric == 1:
+        _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
+               rows, 1, False)
+    else:
+        _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
+               rows, 2, False)
     if k1 > n_steps:
-        _finish_metrics(W, n_real, dt, n_steps, k_ss, met, rows)
+        _finish_metrics(W, n_real, dt, n_steps, int(np.ceil(SS_FRACTION * n_steps - 1e-9)), met,
+                        rows)
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -646,18 +692,20 @@ def simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, step_info, ref_index, 
     q = ref_index[a]
     o = out_row[a]
     rows = out_row[a:a + 1]
-    if fric and extras:
+    # one lane: pow_nb's own branch already skips the log and exp for an exponent of 1, so the
+    # general friction variant (2) serves both friction modes here
+    if fric > 0 and extras:
         _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 True, True)
-    elif fric:
+                 2, True)
+    elif fric > 0:
         _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 True, False)
+                 2, False)
     elif extras:
         _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 False, True)
+                 0, True)
     else:
         _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 False, False)
+                 0, False)
     if k1 <= n_steps:
         for r in range(_N_ROWS):
             S[a, r, 0] = W[r, 0]

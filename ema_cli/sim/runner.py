@@ -38,7 +38,7 @@ from ema_cli.sim.grid import (  # noqa: F401 (re-exported: the runner's grid API
     plan_steps,
     resolution_warnings,
 )
-from ema_cli.sim.kernel import ALIVE_ROW, KERNELS, LANES, N_ROWS
+from ema_cli.sim.kernel import ALIVE_ROW, KERNELS, LANES, N_ROWS, variant_order
 from ema_cli.sim.signals import InputSignal, Reference, Sampler, sampler
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 
@@ -256,12 +256,10 @@ def simulate_batch(
     sig = np.full((n_cases, n_out, N_SIGNALS), np.nan)
     met = np.empty((n_cases, N_METRICS))
     state = np.empty(state_shape)
-    # group the rows that need the costlier kernel variants (friction; digital controller,
-    # quantisers, locked motor) so that a chunk rarely mixes them; each row writes its results
-    # straight into its own row of sig and met (out_row)
-    extra = ((P[:, INDEX["Ts"]] > 0) | (P[:, INDEX["q_pos"]] > 0) | (P[:, INDEX["q_speed"]] > 0)
-             | (P[:, INDEX["locked"]] != 0))
-    order = np.argsort(2 * (P[:, INDEX["friction"]] != 0) + extra, kind="stable")
+    # group the rows that need the same kernel variant (friction and its exponent; digital
+    # controller, quantisers, locked motor, compensators) so that a chunk rarely mixes them;
+    # each row writes its results straight into its own row of sig and met (out_row)
+    order = variant_order(P)
     identity = bool(np.all(order == np.arange(n_cases)))
     Pk = P if identity else np.ascontiguousarray(P[order])
     qk = ref_index if identity else np.ascontiguousarray(ref_index[order])

@@ -149,6 +149,8 @@ def lane_configs() -> list[dict[str, float]]:
                                 "d1": d1[j], "Ts": ts[j], "q_pos": qp[j], "T_load": tl[j]}
         if fric[j]:
             o["sigma2"] = 1e-4 * (1 + j % 3)
+        if j in (7, 15):  # the general Stribeck exponent beside lanes with the default 1
+            o["delta"] = 2.0
         out.append(o)
     out[16].update({"Kpp": 3000, "sat1": "off", "sat2": "off", "sat3": "off"})  # diverges
     return [resolve(o) for o in out]
@@ -184,6 +186,15 @@ def test_lane_batch_setup_is_meaningful(lane_runs):
     live = np.delete(met, 16, axis=0)
     assert np.all(np.isfinite(live[:, MET["iae_pos"]]))
     assert np.all(np.isfinite(live[:, MET["t50"]]))
+
+
+def test_variant_order_groups_rows_by_kernel_variant():
+    # no friction < friction with exponent 1 < other exponent; every extra after all of those
+    rows = [{}, {"friction": 1, "delta": 2.0}, {"Ts": 1e-4}, {"friction": 1},
+            {"dzi_v": 0.5, "friction": 1}, {"friction": 1, "delta": 1.5}, {"alpha": 1e-4},
+            {"friction": 1}]
+    P = np.array([to_row(resolve(o)) for o in rows])
+    assert kernel.variant_order(P).tolist() == [0, 6, 3, 7, 1, 5, 2, 4]
 
 
 def test_lane_batch_equals_single_runs(lane_runs):
