@@ -70,6 +70,7 @@ MAX_RUNS = 100  # seeds of one tuning, at most [-]
 MAX_POP = 10_000  # population, at most [-]
 DEFAULT_BUDGET = 960  # candidate evaluations per run (pop 24 x 40 generations + elites) [-]
 DEFAULT_POP = 24  # population [-]
+DEFAULT_POLISH = 0.33  # share of the budget for the local search after the global one [-]
 
 
 def _at(key: str, message: str) -> ValueError:
@@ -204,9 +205,13 @@ class OptimiserConfig(Strict):
                                                           "seed+1, ...); the best is kept")
     seed: Seed = Field(0, description="seed of the first run")
     polish: float = Field(
-        0.0, ge=0.0, le=0.9, description="fraction of the budget for a compass (pattern) "
-                                           "search from the best point after the global "
-                                           "optimiser (0: none)")
+        DEFAULT_POLISH, ge=0.0, le=0.9,
+        description="fraction of the budget for a local search from the best point after the "
+                    "global optimiser (0: none)")
+    local: Literal["cma", "compass"] = Field(
+        "cma", description="the local search of the polish: cma (CMA-ES: learns a valley "
+                           "across the variables) or compass (pattern search along each "
+                           "variable)")
     patience: NonNegInt = Field(
         0, description="GA: stop after this many generations without improvement (0: never)")
 

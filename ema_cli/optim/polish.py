@@ -1,4 +1,4 @@
-"""A batched compass (pattern) search: the local polish after a global optimiser.
+"""The local polish after a global optimiser: a batched compass (pattern) search, or CMA-ES.
 
 From the best point found, each iteration evaluates the ``2 n`` points one step away along
 each axis (in the problem's own coordinates, clipped to the bounds) in ONE batched
@@ -53,13 +53,23 @@ def compass_search(problem: Problem, x0: np.ndarray, f0: float, budget: int,
     return x, f, hist
 
 
-def polished(problem: Problem, result: GAResult, budget: int) -> GAResult:
-    """``result`` followed by a compass search from its best point with ``budget``
-    evaluations: the histories joined, the counts added."""
+def polished(problem: Problem, result: GAResult, budget: int, method: str = "compass",
+             rng: np.random.Generator | None = None) -> GAResult:
+    """``result`` followed by a local search from its best point with ``budget`` evaluations:
+    ``compass`` (this module) or ``cma`` (``optim.cmaes``, drawing from ``rng``); the histories
+    joined, the counts added."""
     t0 = time.perf_counter()
     if budget < 2 * len(problem.lower):
         return result
-    x, f, h = compass_search(problem, result.x_best_ever, result.cost_best_ever, budget)
+    if method == "cma":
+        from ema_cli.optim.cmaes import cma_search
+
+        x, f, h = cma_search(problem, result.x_best_ever, result.cost_best_ever, budget,
+                             rng if rng is not None else np.random.default_rng(0))
+    elif method == "compass":
+        x, f, h = compass_search(problem, result.x_best_ever, result.cost_best_ever, budget)
+    else:
+        raise ValueError(f"method must be 'compass' or 'cma', got {method!r}")
     g = result.history
     n0 = int(g.evaluations[-1]) if len(g.evaluations) else 0
     hist = GAHistory(np.concatenate([g.best, h.best]), np.concatenate([g.mean, h.mean]),

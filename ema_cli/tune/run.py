@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ema_cli.config.tune import TuneConfig
+from ema_cli.optim.cmaes import default_lam
 from ema_cli.optim.de import DEOptions, run_de
 from ema_cli.optim.ga import GAResult, preset, run_ga
 from ema_cli.optim.polish import polished
@@ -77,9 +78,11 @@ def generations_for(budget: int, pop: int, elites: int = GA_ELITES) -> int:
     return 1 + max((budget - pop) // (pop - elites), 0)
 
 
-def evaluations_for(method: str, budget: int, pop: int, n_var: int, polish: float = 0.0) -> int:
+def evaluations_for(method: str, budget: int, pop: int, n_var: int, polish: float = 0.0,
+                    local: str = "cma") -> int:
     """Candidate evaluations one run of ``method`` spends at most for ``budget`` (whole
-    generations, then the polish's whole iterations of 2*n_var)."""
+    generations, then the local search's whole iterations: ``default_lam(n_var)`` points for
+    cma, 2*n_var for compass)."""
     glob, _ = split_budget(budget, polish)
     if method == "de":
         members, gens = DEOptions(pop=pop, budget=glob).sizes(n_var)
@@ -88,21 +91,23 @@ def evaluations_for(method: str, budget: int, pop: int, n_var: int, polish: floa
         used = pop + (generations_for(glob, pop) - 1) * (pop - GA_ELITES)
     if polish <= 0:
         return used
-    return used + (budget - used) // (2 * n_var) * (2 * n_var)
+    step = default_lam(n_var) if local == "cma" else 2 * n_var
+    return used + (budget - used) // step * step
 
 
 def split_budget(budget: int, polish: float) -> tuple[int, int]:
-    """(global optimiser's share, compass polish's share) of ``budget`` evaluations."""
+    """(global optimiser's share, local polish's share) of ``budget`` evaluations."""
     local = int(round(budget * polish))
     return budget - local, local
 
 
 def one_run(problem: TuneProblem, method: str, budget: int, pop: int, seed: int,
-            patience: int = 0, polish: float = 0.0) -> GAResult:
+            patience: int = 0, polish: float = 0.0, local: str = "cma") -> GAResult:
     """One optimiser run on ``problem`` from ``seed``: the global optimiser on its share of
-    ``budget``, then the compass polish (``optim.polish``) on the rest (``polish`` fraction)."""
+    ``budget``, then the ``local`` search (``optim.polish``: cma or compass) on the rest
+    (``polish`` fraction), drawing from the same generator."""
     rng = np.random.default_rng(seed)
-    glob, local = split_budget(budget, polish)
+    glob, share = split_budget(budget, polish)
     if method == "ga":
         opts = preset("improved", pop=pop, generations=generations_for(glob, pop),
                       elitism=GA_ELITES, pm=GA_PM, patience=patience)
@@ -112,7 +117,7 @@ def one_run(problem: TuneProblem, method: str, budget: int, pop: int, seed: int,
     else:
         raise ValueError(f"method must be 'ga' or 'de', got {method!r}")
     used = res.evaluations
-    return polished(problem, res, budget - used) if local > 0 else res
+    return polished(problem, res, budget - used, local, rng) if share > 0 else res
 
 
 def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = None,
@@ -135,7 +140,8 @@ def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = 
         raise EmaError(f"--budget: {budget} evaluations cannot cover two generations of the "
                        f"population ({opt.pop}); give at least {2 * opt.pop}")
     problem = TuneProblem(cfg, scenarios)
-    per_run = evaluations_for(method, budget, opt.pop, len(problem.variables), opt.polish)
+    per_run = evaluations_for(method, budget, opt.pop, len(problem.variables), opt.polish,
+                              opt.local)
     total = n_runs * per_run
     records: list[RunRecord] = []
     for k in range(n_runs):
@@ -144,7 +150,8 @@ def run_tuning(cfg: TuneConfig, scenarios: list[Scenario], method: str | None = 
             problem.progress = (lambda n, d=done, k=k: progress(k, min(d + n, total), total))
             problem.n_evaluations = 0
         seed = opt.seed + k
-        res = one_run(problem, method, budget, opt.pop, seed, opt.patience, opt.polish)
+        res = one_run(problem, method, budget, opt.pop, seed, opt.patience, opt.polish,
+                      opt.local)
         x = problem.values(res.x[None])[0]
         ev = problem.score(x[None])
         records.append(RunRecord(seed, res, x, float(ev.score[0]), float(ev.cost[0]),

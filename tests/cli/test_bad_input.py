@@ -30,7 +30,7 @@ WRITERS = {
     "freqresp": ["freqresp", "--amplitudes", "1", "--f-min", "5", "--f-max", "10", "--n", "2"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
     "acceptance": ["acceptance", str(ROOT / "configs" / "acceptance.yaml"), "--only", "margins"],
-    "tune": ["tune", str(ROOT / "configs" / "tune.yaml"), "--budget", "64"],
+    "tune": ["tune", str(ROOT / "configs" / "tune.yaml"), "--budget", "128"],
     "sensitivity": ["sensitivity", str(ROOT / "configs" / "sensitivity.yaml"), "--n", "1",
                     "--set", "simulation.duration_s=0.01", "--no-progress", "-j", "1"],
 }

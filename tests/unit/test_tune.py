@@ -68,7 +68,7 @@ def test_one_gain_lands_on_the_brute_force_optimum(brute_force, method):
 def test_the_tuned_scenarios_resimulate_to_the_reported_cost(tmp_path):
     # configs/tune.yaml at a small budget; every written scenario config re-simulated with
     # `ema simulate`'s API gives back the cost tuning.md reports
-    res = tune(ROOT / "configs" / "tune.yaml", {"optimiser.budget": 64})
+    res = tune(ROOT / "configs" / "tune.yaml", {"optimiser.budget": 96, "optimiser.pop": 32})
     out = res.save(tmp_path / "run")
     ratios = []
     for sc in res.outcome.problem.scenarios:
@@ -139,6 +139,8 @@ BASE = {"name": "t", "scenarios": {"s": {"input": {"kind": "step", "amplitude_de
     ({"constraints": {"wobble": {"max": 1, "unit": "deg"}}}, ["constraints.wobble", "unknown"]),
     ({"optimiser": {"budget": 10, "pop": 24}}, ["optimiser", "two generations"]),
     ({"cost": {"metric": "itse"}}, ["cost.metric"]),
+    ({"optimiser": {"local": "nelder-mead"}}, ["optimiser.local", "cma", "compass"]),
+    ({"optimiser": {"polish": 0.95}}, ["optimiser.polish"]),
     ({"surprise": 1}, ["surprise"]),
 ])
 def test_bad_tuning_configs_get_clear_errors(patch, needles):
