@@ -55,7 +55,7 @@ class TuneResult:
 
     @property
     def title(self) -> str:
-        return f"{self.config.name}: tuning ({self.outcome.method.upper()})"
+        return f"{self.config.name}: tuning ({self.outcome.method_label})"
 
     def evaluation(self, which: str) -> Any:
         if which not in CONTROLLERS:

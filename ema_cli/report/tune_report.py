@@ -114,7 +114,7 @@ def tuning_markdown(res: Any, figures: list[str]) -> str:
     after = float(o.after.cost[0])
     before = float(o.before.cost[0])
     lines = [f"# {res.title}", "",
-             f"Config: `{res.source}`. Method: {o.method.upper()}, {len(o.runs)} run(s) of "
+             f"Config: `{res.source}`. Method: {o.method_label}, {len(o.runs)} run(s) of "
              f"{o.runs[0].result.evaluations} candidate evaluations, each running all "
              f"{len(o.problem.scenarios)} scenarios ({cfg.simulation.duration_s:g} s, step "
              f"{cfg.simulation.dt_s:g} s) in one batched kernel call per generation. "

@@ -67,6 +67,16 @@ class TuneOutcome:
         return self.best.feasible
 
     @property
+    def method_label(self) -> str:
+        """The optimiser as a reader names it, e.g. ``GA + CMA-ES polish (last 33 %)``."""
+        opt = self.cfg.optimiser
+        label = self.method.upper()
+        if opt.polish > 0:
+            local = "CMA-ES" if opt.local == "cma" else "compass"
+            label += f" + {local} polish (last {100 * opt.polish:.0f} %)"
+        return label
+
+    @property
     def cost_spread(self) -> float:
         """(largest - smallest)/smallest cost over the runs (0 for one run)."""
         c = np.array([r.cost for r in self.runs])
