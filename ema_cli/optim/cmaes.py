@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ema_cli.optim.ga import GAHistory, Problem
+from ema_cli.optim.polish import IterationLog
 
 DEFAULT_SIGMA = 0.1  # first step, fraction of each variable's range [-]
 DEFAULT_MIN_SIGMA = 1e-6  # smallest step, fraction of each range [-]
@@ -60,7 +61,7 @@ def cma_search(problem: Problem, x0: np.ndarray, f0: float, budget: int,
     C = np.eye(n)
     pc = np.zeros(n)
     ps = np.zeros(n)
-    best, mean, ever, xs, evals = [], [], [], [], []
+    log = IterationLog(n)
     used = 0
     g = 0
     while used + lam <= budget and sigma >= min_sigma:
@@ -90,13 +91,5 @@ def cma_search(problem: Problem, x0: np.ndarray, f0: float, budget: int,
              + cmu * (y_sel.T * w) @ y_sel)
         C = 0.5 * (C + C.T)
         sigma *= float(np.exp((cs / damps) * (norm_ps / chi_n - 1.0)))
-        finite = fc[np.isfinite(fc)]
-        best.append(float(fc[k]))
-        mean.append(float(finite.mean()) if finite.size else np.inf)
-        ever.append(f_best)
-        xs.append(x_best.copy())
-        evals.append(used)
-    hist = GAHistory(np.array(best), np.array(mean), np.array(ever),
-                     np.array(xs).reshape(-1, n), np.array(xs).reshape(-1, n),
-                     np.array(evals, dtype=np.int64))
-    return x_best, f_best, hist
+        log.add(fc, f_best, x_best, used)
+    return x_best, f_best, log.history()

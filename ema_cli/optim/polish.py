@@ -19,6 +19,33 @@ DEFAULT_STEP = 0.05  # first step, fraction of each variable's range [-]
 DEFAULT_MIN_STEP = 1e-4  # smallest step, fraction of each range [-]
 
 
+class IterationLog:
+    """The history of a local search, one entry per iteration (a batch of candidates)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.best: list[float] = []
+        self.mean: list[float] = []
+        self.ever: list[float] = []
+        self.xs: list[np.ndarray] = []
+        self.evals: list[int] = []
+
+    def add(self, fc: np.ndarray, f_best: float, x_best: np.ndarray, used: int) -> None:
+        """One iteration: its candidates' costs ``fc`` (NaN already inf), the best so far and
+        the evaluations used so far."""
+        finite = fc[np.isfinite(fc)]
+        self.best.append(float(fc.min()))
+        self.mean.append(float(finite.mean()) if finite.size else np.inf)
+        self.ever.append(float(f_best))
+        self.xs.append(np.array(x_best, dtype=np.float64))
+        self.evals.append(int(used))
+
+    def history(self) -> GAHistory:
+        xs = np.array(self.xs).reshape(-1, self.n)
+        return GAHistory(np.array(self.best), np.array(self.mean), np.array(self.ever), xs,
+                         xs.copy(), np.array(self.evals, dtype=np.int64))
+
+
 def compass_search(problem: Problem, x0: np.ndarray, f0: float, budget: int,
                    step: float = DEFAULT_STEP, min_step: float = DEFAULT_MIN_STEP
                    ) -> tuple[np.ndarray, float, GAHistory]:
@@ -30,7 +57,7 @@ def compass_search(problem: Problem, x0: np.ndarray, f0: float, budget: int,
     n = lower.shape[0]
     moves = np.vstack([np.eye(n), -np.eye(n)])
     x, f = np.asarray(x0, dtype=np.float64).copy(), float(f0)
-    best, mean, ever, xs, evals = [], [], [], [], []
+    log = IterationLog(n)
     used = 0
     while used + 2 * n <= budget and step >= min_step:
         cand = np.clip(x[None, :] + step * span[None, :] * moves, lower, upper)
@@ -42,15 +69,8 @@ def compass_search(problem: Problem, x0: np.ndarray, f0: float, budget: int,
             x, f = cand[k].copy(), float(fc[k])
         else:
             step *= 0.5
-        finite = fc[np.isfinite(fc)]
-        best.append(float(fc[k]))
-        mean.append(float(finite.mean()) if finite.size else np.inf)
-        ever.append(f)
-        xs.append(x.copy())
-        evals.append(used)
-    hist = GAHistory(np.array(best), np.array(mean), np.array(ever), np.array(xs).reshape(-1, n),
-                     np.array(xs).reshape(-1, n), np.array(evals, dtype=np.int64))
-    return x, f, hist
+        log.add(fc, f, x, used)
+    return x, f, log.history()
 
 
 def polished(problem: Problem, result: GAResult, budget: int, method: str = "compass",
