@@ -18,8 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ema_cli.optim.ga import GAHistory, Problem
-from ema_cli.optim.polish import IterationLog
+from ema_cli.optim.ga import GAHistory, IterationLog, Problem
 
 DEFAULT_SIGMA = 0.1  # first step, fraction of each variable's range [-]
 DEFAULT_MIN_SIGMA = 1e-6  # smallest step, fraction of each range [-]

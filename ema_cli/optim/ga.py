@@ -130,6 +130,33 @@ class GAOptions:
         return self.pop + (self.generations - 1) * (self.pop - self.elitism)
 
 
+class IterationLog:
+    """The history of a local search, one entry per iteration (a batch of candidates)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.best: list[float] = []
+        self.mean: list[float] = []
+        self.ever: list[float] = []
+        self.xs: list[np.ndarray] = []
+        self.evals: list[int] = []
+
+    def add(self, fc: np.ndarray, f_best: float, x_best: np.ndarray, used: int) -> None:
+        """One iteration: its candidates' costs ``fc`` (NaN already inf), the best so far and
+        the evaluations used so far."""
+        finite = fc[np.isfinite(fc)]
+        self.best.append(float(fc.min()))
+        self.mean.append(float(finite.mean()) if finite.size else np.inf)
+        self.ever.append(float(f_best))
+        self.xs.append(np.array(x_best, dtype=np.float64))
+        self.evals.append(int(used))
+
+    def history(self) -> GAHistory:
+        xs = np.array(self.xs).reshape(-1, self.n)
+        return GAHistory(np.array(self.best), np.array(self.mean), np.array(self.ever), xs,
+                         xs.copy(), np.array(self.evals, dtype=np.int64))
+
+
 def preset(mode: Literal["paper", "improved"], **overrides: object) -> GAOptions:
     """The options of a mode, with ``overrides`` (any GAOptions field) applied on top."""
     if mode == "paper":

@@ -13,37 +13,11 @@ import time
 
 import numpy as np
 
-from ema_cli.optim.ga import GAHistory, GAResult, Problem
+from ema_cli.optim.cmaes import cma_search
+from ema_cli.optim.ga import GAHistory, GAResult, IterationLog, Problem
 
 DEFAULT_STEP = 0.05  # first step, fraction of each variable's range [-]
 DEFAULT_MIN_STEP = 1e-4  # smallest step, fraction of each range [-]
-
-
-class IterationLog:
-    """The history of a local search, one entry per iteration (a batch of candidates)."""
-
-    def __init__(self, n: int) -> None:
-        self.n = n
-        self.best: list[float] = []
-        self.mean: list[float] = []
-        self.ever: list[float] = []
-        self.xs: list[np.ndarray] = []
-        self.evals: list[int] = []
-
-    def add(self, fc: np.ndarray, f_best: float, x_best: np.ndarray, used: int) -> None:
-        """One iteration: its candidates' costs ``fc`` (NaN already inf), the best so far and
-        the evaluations used so far."""
-        finite = fc[np.isfinite(fc)]
-        self.best.append(float(fc.min()))
-        self.mean.append(float(finite.mean()) if finite.size else np.inf)
-        self.ever.append(float(f_best))
-        self.xs.append(np.array(x_best, dtype=np.float64))
-        self.evals.append(int(used))
-
-    def history(self) -> GAHistory:
-        xs = np.array(self.xs).reshape(-1, self.n)
-        return GAHistory(np.array(self.best), np.array(self.mean), np.array(self.ever), xs,
-                         xs.copy(), np.array(self.evals, dtype=np.int64))
 
 
 def compass_search(problem: Problem, x0: np.ndarray, f0: float, budget: int,
@@ -82,8 +56,6 @@ def polished(problem: Problem, result: GAResult, budget: int, method: str = "com
     if budget < 2 * len(problem.lower):
         return result
     if method == "cma":
-        from ema_cli.optim.cmaes import cma_search
-
         x, f, h = cma_search(problem, result.x_best_ever, result.cost_best_ever, budget,
                              rng if rng is not None else np.random.default_rng(0))
     elif method == "compass":
