@@ -22,8 +22,6 @@ from ema_cli.optim.ga import GAHistory, IterationLog, Problem
 
 DEFAULT_SIGMA = 0.1  # first step, fraction of each variable's range [-]
 DEFAULT_MIN_SIGMA = 1e-6  # smallest step, fraction of each range [-]
-
-
 MIN_LAM = 16  # smallest population: one chunk of the kernel's SIMD lanes per scenario [-]
 
 

@@ -444,34 +444,49 @@ def _advance(W, k, dt, n_steps, in_ss, in_osc, record, fric_chunk, extras):
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
+def _lane_needs(W, j):
+    """What lane ``j`` of ``W`` (rows: model.params order first) needs of the kernel: (friction,
+    Stribeck exponent 1, extras: the digital controller, a quantiser, the locked motor or a
+    compensator). The one definition :func:`_variant` and :func:`variant_order` share."""
+    extras = (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
+              or W[_LOCKED, j] != 0.0 or W[_DZI, j] > 0.0 or W[_FFC, j] > 0.0
+              or W[_FFS2, j] > 0.0 or W[_NHZ, j] > 0.0 or W[_FFSIG0, j] > 0.0)
+    return W[_FRIC, j] != 0.0, W[_DELTA, j] == 1.0, extras
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _variant(W):
     """The kernel variant the lanes of ``W`` need: (friction mode, extras). The friction mode is
     0 when no lane has friction, 1 when some lane has and every lane's Stribeck exponent is 1
     (the model's default: ``|w/vs|**delta`` is then ``|w/vs|``, no log and exp), else 2;
-    extras is True when some lane uses the digital controller, a quantiser, the locked motor
-    or a compensator."""
+    extras is True when some lane needs it (:func:`_lane_needs`)."""
     fric = False
     unit = True
     extras = False
     for j in range(W.shape[1]):
-        fric = fric or W[_FRIC, j] != 0.0
-        unit = unit and W[_DELTA, j] == 1.0
-        extras = extras or (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
-                            or W[_LOCKED, j] != 0.0 or W[_DZI, j] > 0.0 or W[_FFC, j] > 0.0
-                            or W[_FFS2, j] > 0.0 or W[_NHZ, j] > 0.0 or W[_FFSIG0, j] > 0.0)
+        f, u, e = _lane_needs(W, j)
+        fric = fric or f
+        unit = unit and u
+        extras = extras or e
     return (0 if not fric else (1 if unit else 2)), extras
+
+
+@njit(cache=True, error_model="numpy")
+def _variant_codes_nb(PT):
+    """Per configuration (column of ``PT[N_PARAMS, n_cases]``), the variant it needs alone as
+    one number, cheapest first: 3*extras + (0 no friction, 1 exponent 1, 2 any other)."""
+    out = np.empty(PT.shape[1], dtype=np.int64)
+    for j in range(PT.shape[1]):
+        f, u, e = _lane_needs(PT, j)
+        out[j] = 3 * e + (0 if not f else (1 if u else 2))
+    return out
 
 
 def variant_order(P: np.ndarray) -> np.ndarray:
     """The rows of ``P[n_cases, N_PARAMS]`` sorted (stably) by the kernel variant they need
     (:func:`_variant`, cheapest first), so that a chunk of lanes rarely mixes variants and
     pays for the costlier one: the permutation ``order`` (run ``P[order]``)."""
-    fric = P[:, _FRIC] != 0.0
-    general = fric & (P[:, _DELTA] != 1.0)
-    extras = ((P[:, _TS] > 0.0) | (P[:, _QPOS] > 0.0) | (P[:, _QSPEED] > 0.0)
-              | (P[:, _LOCKED] != 0.0) | (P[:, _DZI] > 0.0) | (P[:, _FFC] > 0.0)
-              | (P[:, _FFS2] > 0.0) | (P[:, _NHZ] > 0.0) | (P[:, _FFSIG0] > 0.0))
-    return np.argsort(3 * extras.astype(np.int64) + fric + general, kind="stable")
+    return np.argsort(_variant_codes_nb(P.T), kind="stable")
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
