@@ -5,32 +5,46 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed-run
 TSTAMP  := $(VENV)/.installed-test
 EMA     := $(BIN)/ema
+# The locks (hashes, every platform, Python 3.11+) are what every machine installs: the tested
+# set. run.lock: the runtime; test.lock: the runtime's pins plus the test and dev tools;
+# build.lock: the build backend for the editable install. `make lock` rewrites them from
+# pyproject.toml keeping every pin it can; `make upgrade` re-resolves to the newest versions,
+# runs the tests and keeps the new locks only if they pass.
+LOCKS   := requirements
+UVC     := $(BIN)/uv pip compile pyproject.toml --universal --python-version 3.11 \
+           --generate-hashes --no-header -q
+PIPI    := $(BIN)/python -m pip install -q --require-hashes --no-deps
 # Tests and benchmarks pin numba to one thread per process unless told otherwise.
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test bench lint reproduce reproduce-ci acceptance acceptance-ci clean
+.PHONY: help run test bench lint reproduce reproduce-ci acceptance acceptance-ci clean lock upgrade
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-14s %s\n", $$1, $$2}'
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q --require-hashes -r $(LOCKS)/build.lock
 
-$(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install -q -e .
+$(STAMP): pyproject.toml $(LOCKS)/run.lock $(LOCKS)/build.lock | $(BIN)/python
+	$(PIPI) -r $(LOCKS)/build.lock
+	$(PIPI) -r $(LOCKS)/run.lock
+	$(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
+	@rm -f $(TSTAMP)
 	@touch $@
 
-$(TSTAMP): pyproject.toml $(STAMP)
-	$(BIN)/python -m pip install -q -e '.[test]'
+$(TSTAMP): $(LOCKS)/test.lock $(STAMP)
+	$(PIPI) -r $(LOCKS)/test.lock
 	@touch $@
 
 run: $(STAMP)  ## run the main job: the bundled default (20 deg step, all defaults)
+	$(BIN)/python -m ema_cli.devtools.check_imports
 	$(EMA) simulate
 
-test: $(TSTAMP)  ## lint, then the whole test suite
+test: $(TSTAMP)  ## lint, undeclared imports (deptry), then the whole test suite
 	$(BIN)/ruff check ema_cli tests
+	$(BIN)/deptry ema_cli
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up, sensitivity, tuning
@@ -57,6 +71,19 @@ acceptance: $(STAMP)  ## the acceptance battery of the reference EMA (configs/ac
 acceptance-ci: $(STAMP)  ## the same as CI runs it (replaces results/acceptance-ci)
 	rm -rf results/acceptance-ci
 	$(EMA) acceptance configs/acceptance.yaml --out results/acceptance-ci
+
+lock: $(TSTAMP)  ## rewrite the locks from pyproject.toml, keeping every pin that still fits
+	$(UVC) -o $(LOCKS)/run.lock
+	$(UVC) --extra test --extra dev -c $(LOCKS)/run.lock -o $(LOCKS)/test.lock
+	@rm -f $(STAMP) $(TSTAMP)
+
+upgrade: $(TSTAMP)  ## re-resolve to the newest versions, run the tests, keep the locks if green
+	cp $(LOCKS)/run.lock $(LOCKS)/run.lock.bak && cp $(LOCKS)/test.lock $(LOCKS)/test.lock.bak
+	$(UVC) --upgrade -o $(LOCKS)/run.lock
+	$(UVC) --upgrade --extra test --extra dev -c $(LOCKS)/run.lock -o $(LOCKS)/test.lock
+	@if $(MAKE) test; then rm -f $(LOCKS)/*.bak; echo "locks upgraded: review git diff $(LOCKS)"; \
+	else mv $(LOCKS)/run.lock.bak $(LOCKS)/run.lock; mv $(LOCKS)/test.lock.bak $(LOCKS)/test.lock; \
+	  rm -f $(STAMP) $(TSTAMP); $(MAKE) $(TSTAMP); echo "upgrade failed its tests: locks kept"; exit 1; fi
 
 clean:  ## remove the virtual environment and caches (results/ is kept)
 	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -86,25 +86,24 @@ def _terminate(signum: int, frame: object) -> None:
 def run(args: list[str] | None = None) -> int:
     """Run the command line -> exit code. Usage errors (a bad option value, an unknown option
     or command) are one line, ``error: ...``, exit code 2, as every other bad input."""
-    try:
-        from typer._click import exceptions as click_errors  # typer's own click
-    except ImportError:  # a typer that uses click itself
-        import click.exceptions as click_errors  # type: ignore[no-redef]
-
+    # typer's public exception base (typer >= 0.29 vendors click: its ClickException, UsageError
+    # and NoArgsIsHelpError all derive from typer.TyperException); the kind is read from the
+    # exception itself, never from a private module
     try:
         result = app(args=args, standalone_mode=False)
-    except click_errors.NoArgsIsHelpError as exc:  # `ema` alone: the help
-        typer.echo(exc.format_message())
-        return 0
-    except click_errors.UsageError as exc:
-        ctx = exc.ctx
-        hint = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
+    except typer.TyperException as exc:
+        kinds = {c.__name__ for c in type(exc).__mro__}
         message = " ".join(exc.format_message().split())
-        typer.echo(f"error: {message}{hint}", err=True)
-        return 2
-    except click_errors.ClickException as exc:
-        typer.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
-        return exc.exit_code
+        if "NoArgsIsHelpError" in kinds:  # `ema` alone: the help
+            typer.echo(exc.format_message())
+            return 0
+        if "UsageError" in kinds:
+            ctx = getattr(exc, "ctx", None)
+            hint = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
+            typer.echo(f"error: {message}{hint}", err=True)
+            return 2
+        typer.echo(f"error: {message}", err=True)
+        return int(getattr(exc, "exit_code", 1))
     except typer.Exit as exc:
         return exc.exit_code
     except typer.Abort:

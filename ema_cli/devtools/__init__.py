@@ -1,0 +1,1 @@
+"""Developer checks run by the Makefile (not commands of ``ema``)."""
