@@ -1,7 +1,7 @@
 """The package's imports go one way, down the layers, and never round in a cycle.
 
 Layers, higher first (a module may import its own folder and any lower layer, never a higher
-one): cli > api (the Python API the commands also run through) > report > analysis, sweep,
+one): devtools (the Makefile's checks, which import every module) > cli > api (the Python API the commands also run through) > report > analysis, sweep,
 identify (siblings: they may import each other only if no cycle of folders results) > config >
 sim > model. The top-level modules (``errors``, ``units``,
 ``timing``, ``files``, ``hashing``, ``_numba``, ``__init__``) are below everything: any layer
@@ -21,7 +21,7 @@ from pathlib import Path
 
 PACKAGE = "ema_cli"
 ROOT = Path(__file__).resolve().parents[2] / PACKAGE
-LAYERS = {"cli": 7, "api": 6, "report": 5, "analysis": 4, "sweep": 4, "identify": 4,
+LAYERS = {"devtools": 8, "cli": 7, "api": 6, "report": 5, "analysis": 4, "sweep": 4, "identify": 4,
           "acceptance": 4, "sensitivity": 4, "optim": 4, "tune": 4, "config": 3,
           "sim": 2, "model": 1}
 """Layer of each folder of the package; top-level modules are layer 0."""
