@@ -205,7 +205,7 @@ class TuneResult:
         from ema_cli.report.tune_report import write_tuning
 
         cfg_json = self.config.model_dump(mode="json", by_alias=True)
-        out, _ = prepare_output("tune", f"tune-{self.config.name}",
+        out, _ = prepare_output("tune", self.config.name,
                                 content_hash({"cfg": cfg_json, "method": self.outcome.method,
                                               "runs": len(self.outcome.runs)}, 16),
                                 folder_arg(folder))

@@ -51,26 +51,27 @@ def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
     return [*pairs, *extra]
 
 
-def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> Any:
-    from rich.table import Table
+def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> None:
+    """Print the identified parameters: value, SE and 95 % interval with units, whether the
+    data determine each, and the truth and error of synthetic data."""
+    from ema_cli.cli.output import print_table
+    from ema_cli.units import fmt_num
 
-    table = Table(title=title, header_style="bold")
-    cols = ["param", "value", "unit", "SE", "95 % interval", "determined"]
+    cols = ["param", "value", "SE", "95 % interval", "determined"]
     if truth:
-        cols += ["truth", "error %"]
-    for col in cols:
-        table.add_column(col, justify="left" if col in ("param", "unit", "determined")
-                         else "right")
+        cols += ["truth", "error"]
+    rows = []
     for n, v in params.items():
-        row = [n, f"{v['value']:.6g}", v["unit"], f"{v['standard_error']:.3g}",
-               f"[{v['ci95'][0]:.6g}, {v['ci95'][1]:.6g}]",
+        u = v["unit"]
+        row = [n, fmt_num(v["value"], u, 6), fmt_num(v["standard_error"], u, 3),
+               f"[{fmt_num(v['ci95'][0], '', 6)}, {fmt_num(v['ci95'][1], u, 6)}]",
                "yes" if v["determined"] else "NOT DETERMINED"]
         if truth:
             t = truth.get(n)
-            row += ["—" if t is None else f"{t:.6g}",
-                    "—" if not t else f"{100 * (v['value'] / t - 1):+.3g}"]
-        table.add_row(*row)
-    return table
+            row += ["unknown" if t is None else fmt_num(t, u, 6),
+                    "unknown" if not t else f"{100 * (v['value'] / t - 1):+.3g} %"]
+        rows.append(row)
+    print_table(title, cols, rows, optional=("95 % interval",), where="identification.json")
 
 
 def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
@@ -153,8 +154,8 @@ def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | 
     fit = ident.result
     folder = ident.save(out)
     js = fit.to_json()
-    console.print(_table(f"ema identify --closed-loop · {fit.problem.log.source}",
-                         js["parameters"], fit.problem.log.truth))
+    _table(f"ema identify --closed-loop · {fit.problem.log.source}", js["parameters"],
+           fit.problem.log.truth)
     console.print("fit RMS: " + ", ".join(f"{c} {v:.4g}" for c, v in js["fit_rms"].items())
                   + f"; J = {fit.cost:.6g}")
     for w in fit.warnings:
@@ -173,8 +174,8 @@ def _friction_sweep(config: Path | None, pairs: list[tuple[str, Any]],
     fit = ident.result
     folder = ident.save(out)
     js = fit.to_json()
-    console.print(_table(f"ema identify --friction-sweep · {fit.data.source}",
-                         js["parameters"], fit.data.truth))
+    _table(f"ema identify --friction-sweep · {fit.data.source}", js["parameters"],
+           fit.data.truth)
     for w in fit.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     console.print(f"residual std {js['cost']['residual_std_nm']:.4g} N·m; sigma0 is not "
