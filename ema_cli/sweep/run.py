@@ -80,6 +80,7 @@ class SweepResult:
     interrupted: bool = False
     timings: dict[str, float] = field(default_factory=dict)
     figures: list[Path] = field(default_factory=list)
+    pending: Any = None  # figures still being drawn (report.sweep_report.finish_sweep)
     signals_file: Path | None = None
     cache_corrupt: int = 0
     memory: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
