@@ -138,7 +138,10 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     t0 = time.perf_counter()
     runs = []
     rows = []
-    for name in names:
+    from ema_cli.progress import report
+
+    for k, name in enumerate(names):
+        report(f"test {k + 1}/{len(names)} {name} ({sp.tests[name].test})")
         test = sp.tests[name]
         p, d = (params, dt) if not test.overrides else resolved(
             dotted_pairs(test.overrides), f"tests.{name}.set")

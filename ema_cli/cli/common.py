@@ -45,9 +45,12 @@ def handle_errors(fn: F) -> F:
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from ema_cli.cli.progress import stages
+
         sync_width()
         try:
-            return fn(*args, **kwargs)
+            with stages(fn.__name__.removesuffix("_cmd")):
+                return fn(*args, **kwargs)
         except EmaError as exc:
             err_console.print(f"[bold red]error:[/] {escape(printable(exc.message))}")
             raise typer.Exit(exc.exit_code) from None

@@ -43,16 +43,14 @@ def tune_cmd(
         raise EmaError(f"config '{config}' is not a file (a tuning config, e.g. "
                        "configs/tune.yaml)")
     check_output(out, "tune")
-    state = {"last": -1}
+    from ema_cli.progress import report
 
     def progress(run: int, done: int, total: int) -> None:
-        pct = int(100 * done / total)
-        if pct // 10 != state["last"] // 10 or done == total:
-            state["last"] = pct
-            err_console.print(f"  run {run + 1}: {done}/{total} evaluations ({pct} %)")
+        report(f"run {run + 1}: evaluations", done, total)
 
     res = tune(config, parse_assignments(set_, "--set"), method=method, runs=runs,
-               budget=budget, progress=progress)
+               budget=budget, progress=progress,
+               log=lambda text: err_console.print(text, highlight=False))
     folder = res.save(out)
     o = res.outcome
     console.print(f"[bold]{res.title}[/]")

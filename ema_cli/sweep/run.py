@@ -192,7 +192,11 @@ class _Progress:
     """A rich progress bar with ETA (or nothing when ``enabled`` is False)."""
 
     def __init__(self, total: int, enabled: bool, label: str) -> None:
+        from ema_cli.progress import report
+
         self.bar = None
+        if total > 0:
+            report("simulations", 0, total, bar=enabled)
         if enabled and total > 0:
             from rich.console import Console
             from rich.progress import (
