@@ -244,8 +244,20 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     if log is not None:
         o = cfg.optimiser
         n_runs = runs or o.runs
-        log(explain_budget(method or o.method, budget or o.budget, o.pop, len(cfg.variables),
-                           o.polish, o.local) + (f"; x {n_runs} runs" if n_runs > 1 else ""))
+        import os
+
+        from ema_cli.progress import BIG_RUN, estimate
+        from ema_cli.tune.run import evaluations_for
+
+        m, b = method or o.method, budget or o.budget
+        log(explain_budget(m, b, o.pop, len(cfg.variables), o.polish, o.local)
+            + (f"; x {n_runs} runs" if n_runs > 1 else ""))
+        n_sims = n_runs * evaluations_for(m, b, o.pop, len(cfg.variables), o.polish,
+                                          o.local) * len(scenarios)
+        if n_sims > BIG_RUN:
+            sim = cfg.simulation
+            log(estimate(n_sims, round(sim.duration_s / sim.dt_s), os.cpu_count() or 1)
+                + f" ({len(scenarios)} scenarios per evaluation; --budget, --runs set it)")
     outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S)
     outcome.actuator_document = actuator_doc
     res = TuneResult(cfg, outcome, str(config) if isinstance(config, str | Path) else "dict",

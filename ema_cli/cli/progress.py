@@ -103,7 +103,8 @@ def stages(command: str):  # type: ignore[no-untyped-def]
         for c in (console, err_console):
             c.push_render_hook(hook)
         try:
-            with reporting(reporter):
+            with reporting(reporter, lambda text: err_console.print(text, highlight=False,
+                                                                    markup=False)):
                 yield reporter
         finally:
             reporter.clear()

@@ -22,6 +22,7 @@ import pandas as pd
 
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
+from ema_cli.progress import announce_size
 from ema_cli.sim.runner import check_memory
 from ema_cli.sim.tables import MET, METRICS, N_METRICS, N_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import JobCache, SignalsRule, signals_rule
@@ -398,6 +399,7 @@ def compute_sweep(
         t0 = time.perf_counter()
         pending = _lookup(cache, by_key, force, plan.dec, n_out, finish, hand_on)
         pending.sort(key=first.__getitem__)
+        announce_size(len(pending), plan.n_steps, workers)
         cached = len(by_key) - len(pending)
         if cache is not None and cache.corrupt:
             run_warnings.append(_corrupt_warning(cache))
