@@ -184,13 +184,13 @@ def test_figure(run: Any, test: Any, title: str) -> Figure:
 
 
 def fmt_value(v: float | None) -> str:
+    """A measured value or limit (4 significant digits; "not measured" for NaN, the infinity
+    sign for an infinite value, e.g. a margin without crossover), without its unit."""
+    from ema_cli.units import fmt_num
+
     if v is None:
         return ""
-    if isinstance(v, float) and math.isinf(v):
-        return "∞" if v > 0 else "-∞"
-    if isinstance(v, float) and math.isnan(v):
-        return "NaN"
-    return f"{v:.4g}"
+    return fmt_num(v, nan="not measured", inf="∞", neg_inf="-∞")
 
 
 def fmt_limit(v: Any) -> str:
