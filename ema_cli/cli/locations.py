@@ -15,7 +15,8 @@ def locations_cmd() -> None:
              pl.paper_sweep) for pl in PLACEMENTS]
     print_table("Nonlinearities (--nl NAME=VALUE, or type@location=VALUE)",
                 ("name", "type", "location", "unit", "default", "magnitude means",
-                 "paper sweep"), rows, justify=["left"] * 7)
+                 "paper sweep"), rows, justify=["left"] * 7,
+                wrap=("magnitude means", "paper sweep"))
 
 
 @handle_errors
@@ -39,4 +40,4 @@ def params_cmd() -> None:
     print_table("Model parameters (SI; --set plant.NAME=VALUE)",
                 ("name", "value", "unit", "description"), rows,
                 justify=["left", "right", "left", "left"], optional=("description",),
-                where="docs/model.md")
+                where="docs/model.md", wrap=("description",))

@@ -23,15 +23,25 @@ def width() -> int:
     return console.width
 
 
+WRAP_WIDTH = 20  # narrowest a word-wrapped column may become [characters]
+
+
 def _table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[str]],
-           justify: Sequence[str], caption: str | None, styles: Sequence[str | None]) -> Any:
+           justify: Sequence[str], caption: str | None, styles: Sequence[str | None],
+           wrap: Sequence[str] = (), measure: bool = False) -> Any:
+    """The rich table; ``wrap`` columns wrap at words (``measure``: capped at WRAP_WIDTH, the
+    width the fit is judged with), every other cell stays on one line."""
     from rich.table import Table
 
     table = Table(title=escape(title) if title else None, header_style="bold",
                   caption=escape(caption) if caption else None, title_justify="left",
                   caption_justify="left")
     for c, j in zip(columns, justify, strict=True):
-        table.add_column(escape(c), justify=j, no_wrap=True)  # type: ignore[arg-type]
+        if c in wrap:
+            table.add_column(escape(c), justify=j, overflow="fold",  # type: ignore[arg-type]
+                             max_width=WRAP_WIDTH if measure else None)
+        else:
+            table.add_column(escape(c), justify=j, no_wrap=True)  # type: ignore[arg-type]
     for r, s in zip(rows, styles, strict=True):
         table.add_row(*(escape(x) for x in r), style=s)
     return table
@@ -46,20 +56,20 @@ def _fits(table: Any, limit: int) -> bool:
 def print_table(title: str | None, columns: Sequence[str], rows: Sequence[Sequence[str]], *,
                 justify: Sequence[str] | None = None, optional: Sequence[str] = (),
                 caption: str | None = None, where: str = "the output files",
-                styles: Sequence[str | None] | None = None) -> str:
+                styles: Sequence[str | None] | None = None, wrap: Sequence[str] = ()) -> str:
     """Print a table that stays readable at the console's width -> the layout used
     (``table``, ``narrow`` with optional columns dropped, or ``blocks``).
 
     ``rows`` are already formatted (units in the cells or the headers); ``optional``: columns
     (by header) that may be dropped, last first, when the table is too wide (the caption says
-    they are in ``where``)."""
+    they are in ``where``); ``wrap``: columns of prose that may wrap at words (judged at
+    WRAP_WIDTH characters)."""
     justify = list(justify or ["left"] + ["right"] * (len(columns) - 1))
     styles = list(styles or [None] * len(rows))
     limit = width()
     cols = list(columns)
-    table = _table(title, cols, rows, justify, caption, styles)
-    if _fits(table, limit):
-        console.print(table)
+    if _fits(_table(title, cols, rows, justify, caption, styles, wrap, True), limit):
+        console.print(_table(title, cols, rows, justify, caption, styles, wrap))
         return "table"
     keep = list(range(len(cols)))
     dropped: list[str] = []
@@ -70,10 +80,10 @@ def print_table(title: str | None, columns: Sequence[str], rows: Sequence[Sequen
         dropped.insert(0, name)
         note = f"not shown at {limit} columns: {', '.join(dropped)} (in {where})"
         cap = f"{caption}; {note}" if caption else note
-        table = _table(title, [cols[k] for k in keep], [[r[k] for k in keep] for r in rows],
-                       [justify[k] for k in keep], cap, styles)
-        if _fits(table, limit):
-            console.print(table)
+        args = (title, [cols[k] for k in keep], [[r[k] for k in keep] for r in rows],
+                [justify[k] for k in keep], cap, styles, wrap)
+        if _fits(_table(*args, measure=True), limit):
+            console.print(_table(*args))
             return "narrow"
     print_blocks(title, cols, rows, caption=caption, styles=styles)
     return "blocks"

@@ -1,6 +1,6 @@
 """A sweep's output folder: resolved config, manifest, metrics.csv, signals, figures, summary.
 
-Layout of ``results/<name>/<stamp>_<hash>/`` (or ``--out``)::
+Layout of ``results/sweep/<name>/<stamp>_<hash>/`` (or ``--out``)::
 
     config.resolved.yaml      the validated config, every default filled in
     manifest.json             version, git commit, seed, job counts, timings, per-job status
@@ -174,7 +174,7 @@ def run_sweep(
 ) -> SweepResult:
     """Run a sweep end to end (``sweep.run.compute_sweep``) and write its outputs.
 
-    out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
+    out        output folder; None: ``results/sweep/<name>/<stamp>_<hash>/``. An existing folder is
                reused only if it holds an earlier run of the same sweep (resume in place).
     cache_dir  job cache; None: :func:`default_cache_dir` when writing (``results/.cache/
                sweep``, or ``OUT/.cache`` when ``out`` is outside results/), no cache otherwise
@@ -298,6 +298,9 @@ class _FigureThread:
         if self.error is not None:
             error = f"the figures could not be drawn: {type(self.error).__name__}: " \
                     f"{' '.join(str(self.error).split())[:200]}"
+        if self.paths:  # summary.md links the figures
+            assert result.folder is not None
+            write_text(result.folder / "summary.md", summary_markdown(result))
         write_manifest(result, self.overrides, error)
         if error is not None:
             raise EmaError(error, 1)
@@ -316,7 +319,7 @@ def finish_sweep(result: SweepResult) -> None:
 def save_sweep(result: SweepResult, out: Path | None = None,
                overrides: Sequence[tuple[str, Any]] = ()) -> Path:
     """Write the folder ``ema sweep`` writes for a sweep computed without one (the Python
-    API's ``Sweep.save``) -> the folder; ``out`` None: a new one under ``results/<name>/``."""
+    API's ``Sweep.save``) -> the folder; ``out`` None: a new one under ``results/sweep/<name>/``."""
     t0 = time.perf_counter()
     plan = result.plan
     folder = result.folder = prepare_folder(plan, out, overrides)
