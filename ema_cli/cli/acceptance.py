@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.progress import report as report_stage
 
 NO_CROSSOVER = {"gain_margin": "no phase crossover", "phase_margin": "no gain crossover"}
 """What an infinite margin means."""
@@ -86,6 +87,7 @@ def acceptance_cmd(
         err_console.print(f"  {run.name} ({run.kind}) {run.wall_s:.2f} s")  # type: ignore[attr-defined]
 
     res = acceptance(spec, parse_assignments(set_, "--set"), only=only, progress=progress)
+    report_stage("writing files and figures")
     folder = res.save(out)
     from ema_cli.report.acceptance_report import fmt_limit, fmt_value
 

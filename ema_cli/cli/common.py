@@ -49,7 +49,7 @@ def handle_errors(fn: F) -> F:
 
         sync_width()
         try:
-            with stages(fn.__name__.removesuffix("_cmd")):
+            with stages(fn.__name__.removesuffix("_cmd"), console, err_console):
                 return fn(*args, **kwargs)
         except EmaError as exc:
             err_console.print(f"[bold red]error:[/] {escape(printable(exc.message))}")

@@ -16,6 +16,7 @@ from ema_cli.cli.common import (
 )
 from ema_cli.cli.output import print_table
 from ema_cli.errors import EmaError
+from ema_cli.progress import report as report_stage
 from ema_cli.units import fmt_num
 
 
@@ -65,6 +66,7 @@ def freqresp_cmd(
     check_output(out, "freqresp")
     res = freqresp(config, parse_assignments(set_, "--set"), amplitudes_deg=amps,
                    f_min_hz=f_min, f_max_hz=f_max, n=n, nl=dict(parse_assignments(nl, "--nl")))
+    report_stage("writing files and figures")
     folder = res.save(out)
     summary = res.summary
     above = f"not reached below {f_max:g} Hz"

@@ -16,6 +16,7 @@ from ema_cli.cli.common import (
     parse_assignments,
 )
 from ema_cli.errors import EmaError
+from ema_cli.progress import report as report_stage
 
 if TYPE_CHECKING:
     from ema_cli.identify.run import IdentificationResult
@@ -181,8 +182,10 @@ def identify_cmd(
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
                        "with --data")
+    report_stage(f"identification ({settings.method}, {settings.runs} run(s))")
     ident = identify(settings)
     res = ident.result
+    report_stage("writing files and figures")
     folder = ident.save(out)
 
     result_table(res)

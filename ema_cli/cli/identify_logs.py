@@ -8,6 +8,7 @@ from typing import Any
 
 from ema_cli.cli.common import check_number, console, err_console, parse_assignments
 from ema_cli.errors import EmaError
+from ema_cli.progress import report as report_stage
 
 MAKE_KINDS = ("closed-loop", "friction-sweep")
 
@@ -150,8 +151,10 @@ def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | No
 def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:
     from ema_cli.api.identify_logs import identify_closed_loop
 
+    report_stage("reading the log, loading the kernel")
     ident = identify_closed_loop(config, pairs)
     fit = ident.result
+    report_stage("writing files and figures")
     folder = ident.save(out)
     js = fit.to_json()
     _table(f"ema identify --closed-loop · {fit.problem.log.source}", js["parameters"],
@@ -170,8 +173,10 @@ def _friction_sweep(config: Path | None, pairs: list[tuple[str, Any]],
                     out: Path | None) -> None:
     from ema_cli.api.identify_logs import identify_friction_sweep
 
+    report_stage("fitting the friction curve")
     ident = identify_friction_sweep(config, pairs)
     fit = ident.result
+    report_stage("writing files and figures")
     folder = ident.save(out)
     js = fit.to_json()
     _table(f"ema identify --friction-sweep · {fit.data.source}", js["parameters"],

@@ -35,10 +35,13 @@ def margins_cmd(
     dead zones, backlash removed; friction viscous; controller continuous), each loop broken at
     its feedback with the other closed; writes margins.json, loops.csv and margins.png."""
     from ema_cli.api.margins import margins
+    from ema_cli.progress import report
     from ema_cli.report.rundir import check_output
 
     check_output(out, "margins")
+    report("linear model and margins")
     res = margins(config, parse_assignments(set_, "--set"))
+    report("writing files and figures")
     folder = res.save(out)
     rows = [(loop, *margins_cells(m)) for loop, m in res.result.items()]
     print_table(res.title, ("loop", "gain margin", "at", "phase margin", "at"), rows)

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import TextIO
+from typing import Any, TextIO
 
 REFRESH_S = 0.1  # shortest interval between two redraws of the terminal line [s]
+GRACE_S = 1.0  # a pipe hears of no stage before the command has run this long [s]: a command
+# that ends at once (a bad option, a quick table) prints its result or error alone
 
 
 class StageReporter:
@@ -25,6 +27,7 @@ class StageReporter:
         self.t0 = time.perf_counter()
         self.last_stage: str | None = None
         self.seen: set[str] = set()  # stages already announced (pipe)
+        self.pending: tuple[str, int | None] | None = None  # reported within GRACE_S (pipe)
         self.last_draw = 0.0
         self.drawn = 0  # characters of the line on screen (terminal)
 
@@ -32,11 +35,15 @@ class StageReporter:
         new = stage != self.last_stage
         self.last_stage = stage
         if not self.tty:
-            if stage not in self.seen:
-                self.seen.add(stage)
-                count = f" ({total:,})" if total else ""
-                self.stream.write(f"{self.command}: {stage}{count} ...\n")
-                self.stream.flush()
+            if stage in self.seen:
+                return
+            if time.perf_counter() - self.t0 < GRACE_S:  # said later, if it lasts
+                self.pending = (stage, total)
+                return
+            if self.pending is not None and self.pending[0] != stage:
+                self._line(*self.pending)
+            self.pending = None
+            self._line(stage, total)
             return
         if bar:  # the caller draws its own bar
             self.clear()
@@ -53,6 +60,12 @@ class StageReporter:
         self.stream.write("\r" + text + " " * max(self.drawn - len(text), 0))
         self.stream.flush()
         self.drawn = len(text)
+
+    def _line(self, stage: str, total: int | None) -> None:
+        self.seen.add(stage)
+        count = f" ({total:,})" if total else ""
+        self.stream.write(f"{self.command}: {stage}{count} ...\n")
+        self.stream.flush()
 
     def clear(self) -> None:
         """Erase the terminal line (before the command prints its results)."""
@@ -86,14 +99,14 @@ class _ClearFirst:
         return renderables
 
 
-def stages(command: str):  # type: ignore[no-untyped-def]
+def stages(command: str, console: Any, err_console: Any):  # type: ignore[no-untyped-def]
     """A context manager for one command: installs a :class:`StageReporter` as the progress
-    reporter and erases its line whenever the command's consoles print, and at the end."""
+    reporter (announcements go to ``err_console``) and erases its line whenever the command's
+    consoles print, and at the end."""
     import contextlib
 
     from rich.console import RenderHook
 
-    from ema_cli.cli.common import console, err_console
     from ema_cli.progress import reporting
 
     @contextlib.contextmanager

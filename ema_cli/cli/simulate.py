@@ -137,10 +137,13 @@ def _simulate(config: Path | None, step: float | None, duration: float | None,
     t_imports = time.perf_counter() - t_start
     check_nl_options(nl_items)
     from ema_cli.api.simulation import simulate
+    from ema_cli.progress import report
 
+    report("simulating (a first run after an update compiles the kernel, ~1 min)")
     run = simulate(config, overrides, nl=dict(nl_items), step_deg=step, duration_s=duration,
                    dt_s=dt)
     run.timings["imports"] = t_imports
     for w in run.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
+    report("writing files and the figure")
     return run.save(out, worker=worker), run

@@ -9,6 +9,7 @@ import typer
 
 from ema_cli.cli.common import console, handle_errors, out_help, parse_assignments
 from ema_cli.cli.output import print_table
+from ema_cli.progress import report as report_stage
 from ema_cli.units import fmt_num
 
 DEFAULT_RTOL = 1e-3  # mirrors config.criteria.DEFAULT_RTOL (checked by a test), kept import-free
@@ -48,6 +49,7 @@ def threshold_cmd(
     res = threshold(config, vary, range_, metric=metric, limit=limit, require=require or (),
                     direction=direction, log=not linear, rtol=rtol,
                     overrides=parse_assignments(set_, "--set"))
+    report_stage("writing files and figures")
     folder = res.save(out)
     r = res.result
     u = res.unit

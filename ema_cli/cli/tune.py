@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.progress import report as report_stage
 
 
 @handle_errors
@@ -51,6 +52,7 @@ def tune_cmd(
     res = tune(config, parse_assignments(set_, "--set"), method=method, runs=runs,
                budget=budget, progress=progress,
                log=lambda text: err_console.print(text, highlight=False))
+    report_stage("writing files and figures")
     folder = res.save(out)
     o = res.outcome
     console.print(f"[bold]{res.title}[/]")

@@ -22,6 +22,7 @@ def test_pipe_prints_one_line_per_stage():
     out = io.StringIO()
     rep = StageReporter("identify", out)
     assert not rep.tty
+    rep.t0 -= 10  # long past the grace period
     for g in range(1, 201):
         rep("GA generation", g, 200, False)
     rep("polish over 0.5 s", 0, 2, False)
@@ -30,6 +31,17 @@ def test_pipe_prints_one_line_per_stage():
     assert out.getvalue().splitlines() == ["identify: GA generation (200) ...",
                                            "identify: polish over 0.5 s (2) ...",
                                            "identify: polish over 1 s (2) ..."]
+
+
+def test_pipe_says_nothing_of_a_command_that_ends_at_once():
+    out = io.StringIO()
+    rep = StageReporter("identify", out)
+    rep("reading the log", None, None, False)  # within the grace period: held
+    assert out.getvalue() == ""
+    rep.t0 -= 10  # ... the command went on
+    rep("GA generation", 1, 200, False)
+    assert out.getvalue().splitlines() == ["identify: reading the log ...",
+                                           "identify: GA generation (200) ..."]
 
 
 def test_terminal_redraws_one_line_and_clears_it(monkeypatch):
