@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.markup import escape
 
 from ema_cli.cli.common import (
     check_number,
@@ -247,7 +246,6 @@ def show_cmd(
 ) -> None:
     """Print the resolved config (every default filled in) and the jobs it expands to."""
     import yaml
-    from rich.table import Table
 
     from ema_cli.sweep.plan import plan_sweep
 
@@ -255,17 +253,15 @@ def show_cmd(
     plan = plan_sweep(cfg, config.parent, str(config))
     console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip(),
                   markup=False)
-    table = Table(title=f"{len(plan.jobs)} jobs ({plan.n_unique} distinct runs); input "
-                        f"{plan.signal.describe()}, {plan.duration:g} s at dt {plan.dt:g} s",
-                  header_style="bold")
-    for col in ("job", "swept values", "key"):
-        table.add_column(col)
+    from ema_cli.cli.output import print_table
+
     jobs = plan.jobs if all_ else plan.jobs[:MAX_SHOW_JOBS]
-    for j in jobs:
-        table.add_row(j.id, escape(j.label), j.key)
-    if len(jobs) < len(plan.jobs):
-        table.caption = f"first {len(jobs)} of {len(plan.jobs)}; --all lists every job"
-    console.print(table)
+    print_table(f"{len(plan.jobs)} jobs ({plan.n_unique} distinct runs); input "
+                f"{plan.signal.describe()}, {plan.duration:g} s at dt {plan.dt:g} s",
+                ("job", "swept values", "key"), [(j.id, j.label, j.key) for j in jobs],
+                justify=["left"] * 3, optional=("key",), where="the job cache keys",
+                caption=(f"first {len(jobs)} of {len(plan.jobs)}; --all lists every job"
+                         if len(jobs) < len(plan.jobs) else None))
     for info in plan.axes:
         console.print(f"axis {info.name}: {info.description}; columns "
                       f"{', '.join(info.columns)}", markup=False)

@@ -196,3 +196,11 @@ def test_print_table_layouts(width, monkeypatch):
     if width < 100:
         assert layout == "blocks"
     assert long in words(text) or " ".join(long.split()) in words(text)
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_show_fits(width):
+    r, text = invoke(width, "show", "configs/deadzone2.yaml")
+    assert r.exit_code == 0, text
+    check_width(text, width)
+    assert "deadzone2 = 0.001 deg" in words(text)
