@@ -44,6 +44,27 @@ def _curve_style(label: str, k: int) -> dict[str, object]:
     return {"color": f"C{k % 10}", "ls": "-", "lw": 1.3, "label": label}
 
 
+COINCIDE_SHARE = 0.005  # curves closer than this share of the panel's span everywhere coincide
+
+
+def _note_coinciding(ax: Axes, series: Sequence[tuple[str, pd.DataFrame]], col: str) -> None:
+    """Say in the panel's title which curves lie on each other (computed: every sample within
+    COINCIDE_SHARE of the span of all curves), so that none seems missing."""
+    from ema_cli.report.figures import coinciding
+
+    curves = {label: ts[col].to_numpy(float) for label, ts in series}
+    vals = np.concatenate(list(curves.values()))
+    vals = vals[np.isfinite(vals)]
+    if vals.size < 2 or len(curves) < 2:
+        return
+    span = float(vals.max() - vals.min())
+    groups = coinciding(curves, COINCIDE_SHARE * span) if span > 0 else [list(curves)]
+    if groups:
+        text = "; ".join(" = ".join(g) for g in groups)
+        ax.set_title(textwrap.fill(f"on each other (within {100 * COINCIDE_SHARE:g} % of "
+                                   f"the span): {text}", 100), fontsize=8)
+
+
 def _tail_limits(ax: Axes, series: Sequence[tuple[str, pd.DataFrame]], col: str,
                  t0: float) -> None:
     vals = np.concatenate([ts.loc[ts["t_s"] >= t0, col].to_numpy() for _, ts in series])
@@ -75,6 +96,8 @@ def overlay_figure(series: Sequence[tuple[str, pd.DataFrame]], title: str,
                 ax.plot(ts0["t_s"], ts0[ref], color="k", ls=":", lw=1.6, label="reference")
             for k, (label, ts) in enumerate(series):
                 ax.plot(ts["t_s"], ts[col], **_curve_style(label, k))
+            if side == 0:
+                _note_coinciding(ax, series, col)
             ax.grid(True, alpha=0.3)
             ax.axhline(0.0, color="0.6", lw=0.6)
             if side == 1:
