@@ -177,3 +177,21 @@ def test_bode_figure_notes_coinciding_curves_and_keeps_legend_off_the_data():
     assert "phase: 0.1 deg = 1 deg = 20 deg = linear model (within 0.5 deg)" in notes
     styles = {(str(line.get_linestyle()), line.get_marker()) for line in ax.get_lines()[:4]}
     assert len(styles) == 4
+
+
+def test_sweep_overlay_says_which_curves_lie_on_each_other_and_keeps_legend_below():
+    import pandas as pd
+
+    from ema_cli.report.sweep_figures import overlay_figure
+
+    t = np.linspace(0, 1, 200)
+    a = pd.DataFrame({"t_s": t, "err": np.exp(-5 * t)})
+    b = pd.DataFrame({"t_s": t, "err": np.exp(-5 * t) + 1e-6})  # on a
+    c = pd.DataFrame({"t_s": t, "err": 0.5 * np.exp(-5 * t)})
+    fig = overlay_figure([("baseline", a), ("x = 1", b), ("x = 2", c)], "t",
+                         [("err", "error [deg]")], legend_title="x")
+    title = fig.axes[0].get_title().replace("\n", " ")
+    assert "on each other" in title and "baseline = x = 1" in title and "x = 2" not in title
+    fig.canvas.draw()
+    (leg,) = fig.legends
+    assert leg.get_window_extent().y1 <= min(ax.get_window_extent().y0 for ax in fig.axes)
