@@ -57,11 +57,15 @@ def tune_cmd(
     o = res.outcome
     console.print(f"[bold]{res.title}[/]")
     ref, before, after = (float(e.cost[0]) for e in (o.reference, o.before, o.after))
-    console.print(f"cost: default controller {ref:.4g}, before tuning {before:.4g}, "
-                  f"tuned {after:.4g} ({100 * (1 - after / ref):.1f} % lower); every "
-                  "constraint met", highlight=False)
-    console.print("tuned: " + ", ".join(f"{k} = {v:.5g}" for k, v in res.tuned.items()),
-                  highlight=False)
+    console.print(f"cost (relative, no unit): default controller {ref:.4g}, before tuning "
+                  f"{before:.4g}, tuned {after:.4g} ({100 * (1 - after / ref):.1f} % lower); "
+                  "every constraint met", highlight=False)
+    from ema_cli.model.params import BY_NAME
+    from ema_cli.units import fmt_num
+
+    console.print("tuned: " + ", ".join(
+        f"{k} = {fmt_num(v, BY_NAME[k].unit if k in BY_NAME else '', 5)}"
+        for k, v in res.tuned.items()), highlight=False)
     if len(o.runs) > 1:
         console.print(f"{len(o.runs)} runs: costs within {100 * o.cost_spread:.2f} %",
                       highlight=False)
