@@ -204,3 +204,18 @@ def test_show_fits(width):
     assert r.exit_code == 0, text
     check_width(text, width)
     assert "deadzone2 = 0.001 deg" in words(text)
+
+
+def test_tune_explains_its_budget_and_prints_units(tmp_path):
+    from ema_cli.tune.run import evaluations_for, explain_budget
+
+    r, text = invoke(80, "tune", "configs/tune.yaml", "--budget", "24", "--set",
+                     "optimiser.pop=8", "--out", str(tmp_path / "t"))
+    assert r.exit_code == 0, text
+    expected = explain_budget("ga", 24, 8, 4, 0.33, "cma")
+    spent = evaluations_for("ga", 24, 8, 4, 0.33, "cma")
+    assert expected in text and f"budget 24 -> {spent} evaluations per run" in text
+    assert f"{spent} evaluations in" in words(text)  # what ran is what was announced
+    stdout = text[text.index("cost (relative, no unit)"):]  # (the stderr lines before it)
+    check_width(stdout, 80)
+    assert "Kpp = " in stdout and "1/s" in stdout and "V*s/rad" in stdout
