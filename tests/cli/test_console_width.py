@@ -219,3 +219,21 @@ def test_tune_explains_its_budget_and_prints_units(tmp_path):
     stdout = text[text.index("cost (relative, no unit)"):]  # (the stderr lines before it)
     check_width(stdout, 80)
     assert "Kpp = " in stdout and "1/s" in stdout and "V*s/rad" in stdout
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_threshold_table_units(width, tmp_path):
+    cfg = tmp_path / "dz.yaml"
+    cfg.write_text("name: dz\ninput: {kind: step, amplitude_deg: 0.1}\n"
+                   "simulation: {duration_s: 0.3}\n")
+    out = tmp_path / "out"
+    r, text = invoke(width, "threshold", str(cfg), "--vary", "deadzone2", "--range", "1e-5",
+                     "0.1", "--metric", "p2p_err_pos_deg", "--limit", "0.002", "--rtol", "0.05",
+                     "--out", str(out))
+    assert r.exit_code == 0, text
+    check_width(text, width)
+    res = json.loads((out / "threshold.json").read_text())
+    flat = words(text)
+    assert f"{res['threshold']:.5g} deg" in flat
+    assert f"[{res['bracket'][0]:.5g} deg, {res['bracket'][1]:.5g} deg]" in flat
+    assert f"{100 * res['relative_width']:.2g} %" in flat
