@@ -61,3 +61,27 @@ def to_si(value: float, unit: str) -> float:
 def from_si(value: float, unit: str) -> float:
     """An SI value -> ``unit`` (a key of :data:`UNITS`)."""
     return value / UNITS[unit][1]
+
+
+def fmt_num(value: float | int | str | None, unit: str = "", digits: int = 4, *,
+            nan: str = "n/a", inf: str | None = None, neg_inf: str | None = None,
+            none: str = "n/a") -> str:
+    """One number as the console prints it: ``digits`` significant digits and its unit
+    (``"12.3 dB"``), or a word for what a non-finite value means (``nan``: not measured or not
+    reached, ``inf``/``neg_inf``: e.g. "no phase crossover"; both default to the signed
+    infinity sign with the unit). Strings pass through unchanged; ``None`` -> ``none``."""
+    if value is None:
+        return none
+    if isinstance(value, str):
+        return value
+    v = float(value)
+    if math.isnan(v):
+        return nan
+    if math.isinf(v):
+        word = inf if v > 0 else neg_inf
+        if word is not None:
+            return word
+        text = "inf" if v > 0 else "-inf"
+    else:
+        text = f"{v:.{digits}g}"
+    return f"{text} {unit}" if unit and unit != "-" else text

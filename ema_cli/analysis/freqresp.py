@@ -73,10 +73,12 @@ def _windows(params: Mapping[str, float], freqs_hz: Sequence[float], n_cases: in
     (frequency index, snapped frequency [Hz], measured window ``signals[case, sample, col]``,
     diverged[case])."""
     from ema_cli.model.params import to_row
+    from ema_cli.progress import report
     from ema_cli.sim.runner import simulate_batch
 
     row = to_row(params)
     for j, f_req in enumerate(freqs_hz):
+        report("frequencies", j, len(freqs_hz))
         f, dec, spp = snap_frequency(f_req, dt)
         if dec * spp < 8 * (HARMONICS + 1):
             raise EmaError(f"{f_req:g} Hz is too fast for dt = {dt:g} s (a period needs "

@@ -88,7 +88,10 @@ def find_threshold(
     status = "found"
     rounds = 0
     last_pass, first_fail = math.nan, math.nan
+    from ema_cli.progress import report
+
     for rounds in range(1, max_rounds + 1):  # noqa: B007 - rounds is reported
+        report(f"bracketing round {rounds}", n_sims)
         grid = _grid(a, b, grid_points, log)
         if direction == "min":
             grid = grid[::-1]  # scan from the benign (large) end

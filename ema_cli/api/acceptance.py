@@ -87,7 +87,7 @@ class AcceptanceResult:
         from ema_cli.report.rundir import finish_output, prepare_output
 
         spec_json = self.spec.model_dump(mode="json", by_alias=True)
-        out, _ = prepare_output("acceptance", f"acceptance-{self.spec.name}",
+        out, _ = prepare_output("acceptance", self.spec.name,
                                 content_hash({"spec": spec_json, "p": self.params}, 16),
                                 folder_arg(folder))
         write_acceptance(out, yaml.safe_dump(spec_json, sort_keys=False), self,
@@ -138,7 +138,10 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     t0 = time.perf_counter()
     runs = []
     rows = []
-    for name in names:
+    from ema_cli.progress import report
+
+    for k, name in enumerate(names):
+        report(f"test {k + 1}/{len(names)} {name} ({sp.tests[name].test})")
         test = sp.tests[name]
         p, d = (params, dt) if not test.overrides else resolved(
             dotted_pairs(test.overrides), f"tests.{name}.set")

@@ -159,7 +159,7 @@ class FrequencyResponse:
         from ema_cli.report.rundir import finish_output, prepare_output
 
         cfg_json = self.config.model_dump(mode="json")
-        out, _ = prepare_output("freqresp", f"freqresp-{self.config.name}",
+        out, _ = prepare_output("freqresp", self.config.name,
                                 content_hash({"cfg": cfg_json, "a": self.amplitudes,
                                               "f": [p.f_hz for p in self.points]}, 16),
                                 folder_arg(folder))

@@ -87,7 +87,7 @@ class Identification:
         from ema_cli.report.rundir import finish_output, prepare_output
 
         settings = self.result.settings.model_dump(mode="json")
-        out, _ = prepare_output("identify", "identify", content_hash(settings, 16),
+        out, _ = prepare_output("identify", "torque", content_hash(settings, 16),
                                 folder_arg(folder))
         write_identification(self.result, out, command="identify")
         finish_output(out)

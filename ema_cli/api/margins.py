@@ -79,7 +79,7 @@ class LoopMargins:
         from ema_cli.report.rundir import finish_output, prepare_output
 
         cfg_json = self.config.model_dump(mode="json")
-        out, _ = prepare_output("margins", f"margins-{self.config.name}",
+        out, _ = prepare_output("margins", self.config.name,
                                 content_hash({"cfg": cfg_json}, 16), folder_arg(folder))
         write_margins(out, yaml.safe_dump(cfg_json, sort_keys=False), self.f_hz, self.loops,
                       self.result, self.title,

@@ -131,8 +131,9 @@ class Simulation:
     def save(self, folder: str | Path | None = None, worker: Any = None) -> Path:
         """Write the run's folder as ``ema simulate`` does (timeseries.csv, metrics.csv,
         tracking.png, config.resolved.yaml, manifest.json) -> the folder. ``folder`` None: a new
-        folder under ``results/<name>/``; a given folder must be new or empty. ``worker``: a
-        ``report.figure_worker.FigureWorker`` to draw the figure in (the CLI's start-up path)."""
+        folder under ``results/simulate/<name>/``; a given folder must be new or empty.
+        ``worker``: a ``report.figure_worker.FigureWorker`` to draw the figure in (the CLI's
+        start-up path)."""
         import yaml
 
         from ema_cli.hashing import content_hash

@@ -92,7 +92,7 @@ class Threshold:
 
         cfg_json = self.config.model_dump(mode="json")
         summary = self.summary
-        out, _ = prepare_output("threshold", f"threshold-{self.config.name}",
+        out, _ = prepare_output("threshold", self.config.name,
                                 content_hash({"cfg": cfg_json, "s": summary}, 16),
                                 folder_arg(folder))
         write_threshold(out, yaml.safe_dump(cfg_json, sort_keys=False), self.result,

@@ -205,7 +205,7 @@ class TuneResult:
         from ema_cli.report.tune_report import write_tuning
 
         cfg_json = self.config.model_dump(mode="json", by_alias=True)
-        out, _ = prepare_output("tune", f"tune-{self.config.name}",
+        out, _ = prepare_output("tune", self.config.name,
                                 content_hash({"cfg": cfg_json, "method": self.outcome.method,
                                               "runs": len(self.outcome.runs)}, 16),
                                 folder_arg(folder))
@@ -216,16 +216,19 @@ class TuneResult:
 
 def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
          runs: int | None = None, budget: int | None = None,
-         progress: Callable[[int, int, int], None] | None = None) -> TuneResult:
+         progress: Callable[[int, int, int], None] | None = None,
+         log: Callable[[str], None] | None = None) -> TuneResult:
     """Tune the controller of ``config`` (a tuning config: YAML file, dict or
     :class:`~ema_cli.config.tune.TuneConfig`); ``method`` (ga|de), ``runs`` (seeds) and
     ``budget`` (candidate evaluations per run) override the config's optimiser section.
-    ``progress(run, done, total)`` is called after each generation. Raises EmaError when no
+    ``progress(run, done, total)`` is called after each generation; ``log(text)`` once before
+    the run with how the budget becomes whole generations (:func:`tune.run.explain_budget`).
+    Raises EmaError when no
     candidate meets every constraint (nothing is written then)."""
     from ema_cli.config.loader import load_config
     from ema_cli.config.tune import MAX_BUDGET, MAX_RUNS, TuneConfig
     from ema_cli.tune.problem import build_scenarios
-    from ema_cli.tune.run import run_tuning
+    from ema_cli.tune.run import explain_budget, run_tuning
 
     if config is None:
         raise EmaError("tune needs a tuning config (a YAML file such as configs/tune.yaml)")
@@ -238,6 +241,23 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, TuneConfig)
     scenarios, actuator_doc = build_scenarios(cfg, base_dir(config))
+    if log is not None:
+        o = cfg.optimiser
+        n_runs = runs or o.runs
+        import os
+
+        from ema_cli.progress import BIG_RUN, estimate
+        from ema_cli.tune.run import evaluations_for
+
+        m, b = method or o.method, budget or o.budget
+        log(explain_budget(m, b, o.pop, len(cfg.variables), o.polish, o.local)
+            + (f"; x {n_runs} runs" if n_runs > 1 else ""))
+        n_sims = n_runs * evaluations_for(m, b, o.pop, len(cfg.variables), o.polish,
+                                          o.local) * len(scenarios)
+        if n_sims > BIG_RUN:
+            sim = cfg.simulation
+            log(estimate(n_sims, round(sim.duration_s / sim.dt_s), os.cpu_count() or 1)
+                + f" ({len(scenarios)} scenarios per evaluation; --budget, --runs set it)")
     outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S)
     outcome.actuator_document = actuator_doc
     res = TuneResult(cfg, outcome, str(config) if isinstance(config, str | Path) else "dict",

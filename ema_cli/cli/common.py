@@ -20,6 +20,15 @@ err_console = Console(stderr=True, highlight=False, soft_wrap=True)
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def sync_width() -> None:
+    """Make the consoles follow ``COLUMNS`` as it is when a command starts (rich reads it once,
+    when a console is created; a test runner may set it later)."""
+    cols = os.environ.get("COLUMNS", "")
+    if cols.isdigit() and int(cols) > 0:
+        console.width = int(cols)
+        err_console.width = int(cols)
+
+
 def printable(text: str) -> str:
     """``text`` as one printable line: control characters (from a binary file quoted in a
     message) shown as ``?``, line breaks as spaces."""
@@ -36,8 +45,12 @@ def handle_errors(fn: F) -> F:
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from ema_cli.cli.progress import stages
+
+        sync_width()
         try:
-            return fn(*args, **kwargs)
+            with stages(fn.__name__.removesuffix("_cmd"), console, err_console):
+                return fn(*args, **kwargs)
         except EmaError as exc:
             err_console.print(f"[bold red]error:[/] {escape(printable(exc.message))}")
             raise typer.Exit(exc.exit_code) from None

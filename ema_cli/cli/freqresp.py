@@ -14,7 +14,10 @@ from ema_cli.cli.common import (
     out_help,
     parse_assignments,
 )
+from ema_cli.cli.output import print_table
 from ema_cli.errors import EmaError
+from ema_cli.progress import report as report_stage
+from ema_cli.units import fmt_num
 
 
 def parse_amplitudes(text: str | None) -> list[float]:
@@ -53,8 +56,6 @@ def freqresp_cmd(
     """Sinestream frequency response of the load angle at each amplitude: gain, phase, harmonic
     distortion and the limits reached, with the -3 dB bandwidth and -90 deg frequency per
     amplitude; writes freqresp.csv, freqresp.json, bode.png and summary.md."""
-    from rich.table import Table
-
     from ema_cli.api.freqresp import freqresp
     from ema_cli.report.rundir import check_output
 
@@ -65,22 +66,22 @@ def freqresp_cmd(
     check_output(out, "freqresp")
     res = freqresp(config, parse_assignments(set_, "--set"), amplitudes_deg=amps,
                    f_min_hz=f_min, f_max_hz=f_max, n=n, nl=dict(parse_assignments(nl, "--nl")))
+    report_stage("writing files and figures")
     folder = res.save(out)
     summary = res.summary
-    table = Table(title=res.title)
-    for c in ("amplitude [deg]", "-3 dB [Hz]", "-90 deg [Hz]", "peak [dB]", "max THD [%]",
-              "limits", "binding"):
-        table.add_column(c, justify="right")
-    for r in summary["amplitudes"]:
-        table.add_row(f"{r['amplitude_deg']:g}", f"{r['f_3db_hz']:.4g}",
-                      f"{r['f_minus90_hz']:.4g}", f"{r['peak_db']:.3g}",
-                      f"{r['max_thd_pct']:.3g}", ", ".join(r["limits"]) or "none",
-                      r["binding_limit"] or "none")
-    console.print(table)
+    above = f"not reached below {f_max:g} Hz"
+    rows = [(fmt_num(r["amplitude_deg"], "deg"), fmt_num(r["f_3db_hz"], "Hz", nan=above),
+             fmt_num(r["f_minus90_hz"], "Hz", nan=above), fmt_num(r["peak_db"], "dB", 3),
+             fmt_num(r["max_thd_pct"], "%", 3), ", ".join(r["limits"]) or "none",
+             r["binding_limit"] or "none") for r in summary["amplitudes"]]
+    print_table(res.title, ("amplitude", "-3 dB", "-90 deg", "peak gain", "max THD",
+                            "limits reached", "binding limit"), rows,
+                optional=("limits reached",), where="freqresp.json")
     drop = summary["bandwidth_drop"]
     if drop is not None:
         console.print(f"bandwidth drops > 10 % at {drop['amplitude_deg']:g} deg "
-                      f"({drop['f_3db_hz']:.4g} Hz vs {drop['small_signal_f_3db_hz']:.4g} Hz); "
+                      f"({fmt_num(drop['f_3db_hz'], 'Hz', nan=above)} vs "
+                      f"{fmt_num(drop['small_signal_f_3db_hz'], 'Hz', nan=above)}); "
                       f"binding limit: {drop['binding_limit'] or 'none'}")
     est = summary["linear"]["limit_at_bandwidth"]
     if est is not None:

@@ -16,47 +16,45 @@ from ema_cli.cli.common import (
     parse_assignments,
 )
 from ema_cli.errors import EmaError
+from ema_cli.progress import report as report_stage
 
 if TYPE_CHECKING:
-    from rich.table import Table
-
     from ema_cli.identify.run import IdentificationResult
 
 Range = tuple[float, float]
 
 
-def _fmt(v: float | None, digits: int = 6) -> str:
-    return "—" if v is None else f"{v:.{digits}g}"
-
-
-def result_table(res: IdentificationResult) -> Table:
-    """Identified (median over runs), truth, |error| % (median / worst), LS optimum ± SE and
-    the runs' |distance| to it."""
-    from rich.table import Table
+def result_table(res: IdentificationResult) -> None:
+    """Print identified (median over runs), truth, |error| % (median / worst), LS optimum ± SE
+    and the runs' |distance| to it, with units."""
+    from ema_cli.cli.output import print_table
+    from ema_cli.identify.problem import PARAM_UNITS
+    from ema_cli.units import fmt_num
 
     summ = res.summary()
     n_runs = len(res.runs)
     many = n_runs > 1
-    table = Table(title=f"ema identify · {res.settings.method} · model {res.settings.model} · "
-                        f"{n_runs} run(s)", header_style="bold")
-    table.caption = (
+    caption = (
         ("identified: median over the runs; error and Δopt: median/worst over the runs. "
          if many else "") + "error = |identified − truth|/truth; Δopt = |identified − LS "
         "optimum|/optimum; SE: standard error of the LS optimum")
-    for col in ("param", "identified", "truth", "error %", "LS optimum", "SE", "Δopt %"):
-        table.add_column(col, justify="left" if col == "param" else "right")
+    rows = []
     for n, s in summ.items():
+        u = PARAM_UNITS[n]
         if s["error_pct_median"] is None:
-            e = "—"
+            e = "unknown"
         elif many:
-            e = f"{s['error_pct_median']:.2g}/{s['error_pct_worst']:.2g}"
+            e = f"{s['error_pct_median']:.2g}/{s['error_pct_worst']:.2g} %"
         else:
-            e = f"{s['error_pct_worst']:.2g}"
-        d = (f"{s['dist_opt_pct_median']:.2g}/{s['dist_opt_pct_worst']:.2g}" if many
-             else f"{s['dist_opt_pct_worst']:.2g}")
-        table.add_row(n, _fmt(s["median"]), _fmt(s["truth"]), e,
-                      _fmt(s["optimum"]), _fmt(s["optimum_se"], 2), d)
-    return table
+            e = f"{s['error_pct_worst']:.2g} %"
+        d = (f"{s['dist_opt_pct_median']:.2g}/{s['dist_opt_pct_worst']:.2g} %" if many
+             else f"{s['dist_opt_pct_worst']:.2g} %")
+        rows.append((n, fmt_num(s["median"], u, 6), fmt_num(s["truth"], u, 6, none="unknown"),
+                     e, fmt_num(s["optimum"], u, 6), fmt_num(s["optimum_se"], u, 2), d))
+    print_table(f"ema identify · {res.settings.method} · model {res.settings.model} · "
+                f"{n_runs} run(s)",
+                ("param", "identified", "truth", "error", "LS optimum", "SE", "Δopt"), rows,
+                caption=caption, optional=("SE", "Δopt"), where="identification.json")
 
 
 @handle_errors
@@ -64,11 +62,14 @@ def identify_cmd(
     config: Annotated[Path | None, typer.Argument(
         help="YAML settings (e.g. configs/identify.yaml); options below override it.")] = None,
     k_range: Annotated[Range | None, typer.Option(
-        "--k-range", help="kL search range LO HI [N*m/rad] (default 500 700).")] = None,
+        "--k-range", metavar="LO HI",
+        help="kL search range LO HI [N*m/rad] (default 500 700).")] = None,
     alpha_range: Annotated[Range | None, typer.Option(
-        "--alpha-range", help="alpha search range LO HI in rad (default 0.002 0.004).")] = None,
+        "--alpha-range", metavar="LO HI",
+        help="alpha search range LO HI in rad (default 0.002 0.004).")] = None,
     c_range: Annotated[Range | None, typer.Option(
-        "--c-range", help="c search range LO HI when fitted [N*m*s/rad] (default 0 5).")] = None,
+        "--c-range", metavar="LO HI",
+        help="c search range LO HI when fitted [N*m*s/rad] (default 0 5).")] = None,
     method: Annotated[str | None, typer.Option(
         "--method", help="ga (improved GA, default), ga-paper (the paper's binary GA) or "
                          "exact (least squares only).")] = None,
@@ -181,11 +182,13 @@ def identify_cmd(
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
                        "with --data")
+    report_stage(f"identification ({settings.method}, {settings.runs} run(s))")
     ident = identify(settings)
     res = ident.result
+    report_stage("writing files and figures")
     folder = ident.save(out)
 
-    console.print(result_table(res))
+    result_table(res)
     for w in res.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     console.print("units: " + ", ".join(f"{n} {PARAM_UNITS[n]}" for n in res.names))

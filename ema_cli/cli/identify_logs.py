@@ -8,6 +8,7 @@ from typing import Any
 
 from ema_cli.cli.common import check_number, console, err_console, parse_assignments
 from ema_cli.errors import EmaError
+from ema_cli.progress import report as report_stage
 
 MAKE_KINDS = ("closed-loop", "friction-sweep")
 
@@ -51,26 +52,27 @@ def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
     return [*pairs, *extra]
 
 
-def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> Any:
-    from rich.table import Table
+def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> None:
+    """Print the identified parameters: value, SE and 95 % interval with units, whether the
+    data determine each, and the truth and error of synthetic data."""
+    from ema_cli.cli.output import print_table
+    from ema_cli.units import fmt_num
 
-    table = Table(title=title, header_style="bold")
-    cols = ["param", "value", "unit", "SE", "95 % interval", "determined"]
+    cols = ["param", "value", "SE", "95 % interval", "determined"]
     if truth:
-        cols += ["truth", "error %"]
-    for col in cols:
-        table.add_column(col, justify="left" if col in ("param", "unit", "determined")
-                         else "right")
+        cols += ["truth", "error"]
+    rows = []
     for n, v in params.items():
-        row = [n, f"{v['value']:.6g}", v["unit"], f"{v['standard_error']:.3g}",
-               f"[{v['ci95'][0]:.6g}, {v['ci95'][1]:.6g}]",
+        u = v["unit"]
+        row = [n, fmt_num(v["value"], u, 6), fmt_num(v["standard_error"], u, 3),
+               f"[{fmt_num(v['ci95'][0], '', 6)}, {fmt_num(v['ci95'][1], u, 6)}]",
                "yes" if v["determined"] else "NOT DETERMINED"]
         if truth:
             t = truth.get(n)
-            row += ["—" if t is None else f"{t:.6g}",
-                    "—" if not t else f"{100 * (v['value'] / t - 1):+.3g}"]
-        table.add_row(*row)
-    return table
+            row += ["unknown" if t is None else fmt_num(t, u, 6),
+                    "unknown" if not t else f"{100 * (v['value'] / t - 1):+.3g} %"]
+        rows.append(row)
+    print_table(title, cols, rows, optional=("95 % interval",), where="identification.json")
 
 
 def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
@@ -149,12 +151,14 @@ def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | No
 def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:
     from ema_cli.api.identify_logs import identify_closed_loop
 
+    report_stage("reading the log, loading the kernel")
     ident = identify_closed_loop(config, pairs)
     fit = ident.result
+    report_stage("writing files and figures")
     folder = ident.save(out)
     js = fit.to_json()
-    console.print(_table(f"ema identify --closed-loop · {fit.problem.log.source}",
-                         js["parameters"], fit.problem.log.truth))
+    _table(f"ema identify --closed-loop · {fit.problem.log.source}", js["parameters"],
+           fit.problem.log.truth)
     console.print("fit RMS: " + ", ".join(f"{c} {v:.4g}" for c, v in js["fit_rms"].items())
                   + f"; J = {fit.cost:.6g}")
     for w in fit.warnings:
@@ -169,12 +173,14 @@ def _friction_sweep(config: Path | None, pairs: list[tuple[str, Any]],
                     out: Path | None) -> None:
     from ema_cli.api.identify_logs import identify_friction_sweep
 
+    report_stage("fitting the friction curve")
     ident = identify_friction_sweep(config, pairs)
     fit = ident.result
+    report_stage("writing files and figures")
     folder = ident.save(out)
     js = fit.to_json()
-    console.print(_table(f"ema identify --friction-sweep · {fit.data.source}",
-                         js["parameters"], fit.data.truth))
+    _table(f"ema identify --friction-sweep · {fit.data.source}", js["parameters"],
+           fit.data.truth)
     for w in fit.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     console.print(f"residual std {js['cost']['residual_std_nm']:.4g} N·m; sigma0 is not "

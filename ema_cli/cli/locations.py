@@ -2,25 +2,21 @@
 
 from __future__ import annotations
 
-from ema_cli.cli.common import console, handle_errors
+from ema_cli.cli.common import handle_errors
 
 
 @handle_errors
 def locations_cmd() -> None:
     """The nine nonlinearity locations of the paper: type, location, unit, default, meaning."""
-    from rich.table import Table
-
+    from ema_cli.cli.output import print_table
     from ema_cli.model.nonlinearities import PLACEMENTS
 
-    table = Table(title="Nonlinearities (--nl NAME=VALUE, or type@location=VALUE)")
-    for col in ("name", "type", "location", "unit", "default"):
-        table.add_column(col, no_wrap=True)
-    for col in ("magnitude means", "paper sweep"):
-        table.add_column(col, overflow="fold")
-    for pl in PLACEMENTS:
-        table.add_row(pl.alias or "", pl.type, pl.location, pl.unit, pl.default, pl.meaning,
-                      pl.paper_sweep)
-    console.print(table)
+    rows = [(pl.alias or "", pl.type, pl.location, pl.unit, pl.default, pl.meaning,
+             pl.paper_sweep) for pl in PLACEMENTS]
+    print_table("Nonlinearities (--nl NAME=VALUE, or type@location=VALUE)",
+                ("name", "type", "location", "unit", "default", "magnitude means",
+                 "paper sweep"), rows, justify=["left"] * 7,
+                wrap=("magnitude means", "paper sweep"))
 
 
 @handle_errors
@@ -28,21 +24,20 @@ def params_cmd() -> None:
     """The model parameter table (SI), as `--set plant.NAME=VALUE` takes it."""
     import math
 
-    from rich.table import Table
-
+    from ema_cli.cli.output import print_table
     from ema_cli.model.params import PARAMS, resolve
 
     values = resolve()
-    table = Table(title="Model parameters (SI; --set plant.NAME=VALUE)")
-    for col in ("name", "value", "unit"):
-        table.add_column(col, no_wrap=True)
-    table.add_column("description", overflow="fold")
+    rows = []
     for p in PARAMS:
         v = values[p.name]
         if p.choices:
             text = next(k for k, x in p.choices.items() if x == v)
         else:
             text = "off" if math.isinf(v) else f"{v:.6g}"
-        table.add_row(p.name, text + ("" if p.default is not None else " (derived)"), p.unit,
-                      p.description)
-    console.print(table)
+        rows.append((p.name, text + ("" if p.default is not None else " (derived)"), p.unit,
+                     p.description))
+    print_table("Model parameters (SI; --set plant.NAME=VALUE)",
+                ("name", "value", "unit", "description"), rows,
+                justify=["left", "right", "left", "left"], optional=("description",),
+                where="docs/model.md", wrap=("description",))

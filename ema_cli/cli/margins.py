@@ -8,6 +8,18 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.cli.output import print_table
+from ema_cli.units import fmt_num
+
+
+def margins_cells(m: object) -> tuple[str, str, str, str]:
+    """Gain margin, its frequency, phase margin, its frequency, with units, or in words when
+    the loop never crosses -180 deg (no phase crossover) or 0 dB (no gain crossover)."""
+    gm, fg, pm, fp = (getattr(m, k) for k in ("gm_db", "f_gm_hz", "pm_deg", "f_pm_hz"))
+    return (fmt_num(gm, "dB", inf="no phase crossover", nan="no phase crossover"),
+            fmt_num(fg, "Hz", nan="-", inf="-"),
+            fmt_num(pm, "deg", inf="no gain crossover", nan="no gain crossover"),
+            fmt_num(fp, "Hz", nan="-", inf="-"))
 
 
 @handle_errors
@@ -22,21 +34,17 @@ def margins_cmd(
     """Stability margins of the position and speed loops of the linear limit (saturations,
     dead zones, backlash removed; friction viscous; controller continuous), each loop broken at
     its feedback with the other closed; writes margins.json, loops.csv and margins.png."""
-    from rich.table import Table
-
     from ema_cli.api.margins import margins
+    from ema_cli.progress import report
     from ema_cli.report.rundir import check_output
 
     check_output(out, "margins")
+    report("linear model and margins")
     res = margins(config, parse_assignments(set_, "--set"))
+    report("writing files and figures")
     folder = res.save(out)
-    table = Table(title=res.title)
-    for c in ("loop", "gain margin [dB]", "at [Hz]", "phase margin [deg]", "at [Hz]"):
-        table.add_column(c, justify="left" if c == "loop" else "right")
-    for loop, m in res.result.items():
-        table.add_row(loop, f"{m.gm_db:.4g}", f"{m.f_gm_hz:.4g}", f"{m.pm_deg:.4g}",
-                      f"{m.f_pm_hz:.4g}")
-    console.print(table)
+    rows = [(loop, *margins_cells(m)) for loop, m in res.result.items()]
+    print_table(res.title, ("loop", "gain margin", "at", "phase margin", "at"), rows)
     for n in res.notes:
         err_console.print(f"note: {n}")
     console.print(f"-> {folder}")

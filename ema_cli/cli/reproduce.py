@@ -35,8 +35,6 @@ def reproduce_cmd(
     write REPORT.md, claims.csv, the figures and a manifest. Exits 1 if any claim fails."""
     import time
 
-    from rich.table import Table
-
     from ema_cli.analysis.reproduce import load_experiment
     from ema_cli.hashing import content_hash
     from ema_cli.report.reproduce_report import run_experiment, write_reproduction
@@ -56,15 +54,16 @@ def reproduce_cmd(
     wall = time.perf_counter() - t0
     report = write_reproduction(rep, folder, wall)
     finish_output(folder)
-    table = Table(title=f"{exp.name}: claims")
-    for c in ("claim", "computed", "result"):
-        table.add_column(c, overflow="fold")
-    for v in rep.verdicts:
-        table.add_row(v.claim.id, v.measured if not v.error else v.error,
-                      "[green]PASS[/]" if v.passed else "[bold red]FAIL[/]")
-    console.print(table)
+    from ema_cli.cli.output import print_table
+    from ema_cli.units import fmt_num
+
+    print_table(f"{exp.name}: claims", ("claim", "result", "computed"),
+                [(v.claim.id, "PASS" if v.passed else "FAIL",
+                  v.measured if not v.error else v.error) for v in rep.verdicts],
+                justify=["left"] * 3,
+                styles=[None if v.passed else "bold red" for v in rep.verdicts])
     for t in rep.thresholds:
-        console.print(f"threshold {t.spec.id}: {t.value:.4g} {t.unit}"
+        console.print(f"threshold {t.spec.id}: {fmt_num(t.value, t.unit, nan='not found')}"
                       + (f" (paper: {t.spec.paper_value:g})" if t.spec.paper_value else ""))
     console.print(f"{len(rep.verdicts) - len(rep.failed)}/{len(rep.verdicts)} claims pass "
                   f"in {wall:.1f} s -> {report}")

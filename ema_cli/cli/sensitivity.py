@@ -75,7 +75,7 @@ def sensitivity_cmd(
             t = ranking(ix[(ix["input"] == r.name) & (ix["metric"] == metric)], res.method)
             top = ", ".join(f"{row['factor']} {row[key]:.3g}" for _, row in
                             t.head(TOP_FACTORS).iterrows())
-            console.print(f"{r.name} {metric}: {top}")
+            console.print(f"{r.name} {metric} ({key}, no unit): {top}")
     for note in res.notes:
         err_console.print(f"[yellow]note:[/] {note}")
     console.print(f"{res.n_runs:,} runs ({res.computed:,} computed, {res.cached:,} cached) in "

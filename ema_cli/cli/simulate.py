@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated, Any
 
 import typer
 
@@ -16,9 +16,7 @@ from ema_cli.cli.common import (
     parse_assignments,
 )
 from ema_cli.errors import EmaError
-
-if TYPE_CHECKING:
-    from rich.table import Table
+from ema_cli.units import fmt_num
 
 HEAVY_MODULES = ("numpy", "ema_cli._numba", "ema_cli.config.loader", "ema_cli.sim.runner",
                  "ema_cli.api.simulation", "ema_cli.report.simulate_report",
@@ -55,18 +53,25 @@ def check_nl_options(items: list[tuple[str, str]]) -> None:
             raise EmaError(f"--nl {name}={value}: {exc.message}") from None
 
 
-def metrics_table(row: dict[str, float], title: str) -> Table:
-    """A rich table of the key metrics of one run."""
-    from rich.table import Table
+NOT_REACHED = {"rise_time_s": "not reached", "t50_s": "not reached",
+               "settling_time_s": "not settled within {duration:g} s"}
+"""What a NaN of a time metric means (the response never got there in the simulated time)."""
 
-    table = Table(title=title, show_header=True, header_style="bold")
-    table.add_column("metric")
-    table.add_column("value", justify="right")
-    table.add_column("unit")
+
+def metrics_rows(row: dict[str, float], duration_s: float) -> list[tuple[str, str]]:
+    """The key metrics of one run: (what, value with its unit or in words)."""
+    rows = []
     for key, label, unit in SUMMARY_METRICS:
-        v = row[key]
-        table.add_row(label, "n/a" if v != v else f"{v:.4g}", unit)
-    return table
+        word = NOT_REACHED.get(key, "n/a").format(duration=duration_s)
+        rows.append((label, fmt_num(row[key], unit, nan=word)))
+    return rows
+
+
+def print_metrics(row: dict[str, float], title: str, duration_s: float) -> None:
+    """Print the key metrics of one run (a table at any console width)."""
+    from ema_cli.cli.output import print_table
+
+    print_table(title, ("metric", "value"), metrics_rows(row, duration_s))
 
 
 @handle_errors
@@ -102,7 +107,7 @@ def simulate_cmd(
             worker.cancel()
         raise
     row = run.summary
-    console.print(metrics_table(row, run.title))
+    print_metrics(row, run.title, run.config.simulation.duration_s)
     kernel = run.timings["simulation"]
     console.print(f"{run.batch.n_steps:,} steps in {kernel * 1e3:.1f} ms "
                   f"(total {time.perf_counter() - t_start:.2f} s) -> {folder}")
@@ -132,10 +137,13 @@ def _simulate(config: Path | None, step: float | None, duration: float | None,
     t_imports = time.perf_counter() - t_start
     check_nl_options(nl_items)
     from ema_cli.api.simulation import simulate
+    from ema_cli.progress import report
 
+    report("simulating (a first run after an update compiles the kernel, ~1 min)")
     run = simulate(config, overrides, nl=dict(nl_items), step_deg=step, duration_s=duration,
                    dt_s=dt)
     run.timings["imports"] = t_imports
     for w in run.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
+    report("writing files and the figure")
     return run.save(out, worker=worker), run

@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from rich.markup import escape
 
 from ema_cli.cli.common import (
     check_number,
@@ -17,16 +16,13 @@ from ema_cli.cli.common import (
     parse_assignments,
 )
 from ema_cli.errors import EmaError
+from ema_cli.units import fmt_num
 
 if TYPE_CHECKING:
-    from rich.table import Table
-
     from ema_cli.sweep.run import SweepResult
 
 MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)
 MAX_TABLE_METRICS = 4  # metric columns of the terminal summary table
-LABEL_WIDTH = 30  # widest "swept values" column of the terminal table [characters]
-METRIC_WIDTH = 7  # narrowest metric column of the terminal table [characters]
 MAX_SHOW_JOBS = 50  # jobs listed by `ema show` unless --all
 MAX_WORKERS = 4096  # --n-jobs above this is refused
 
@@ -51,35 +47,32 @@ def _load(config: Path, set_: list[str] | None) -> tuple[Any, list[tuple[str, st
     return load_config(config, overrides, StudyConfig), overrides
 
 
-def summary_table(result: SweepResult) -> Table:
-    """The closing terminal table: one row per job (capped), key metrics in edge units."""
-    from rich.table import Table
-
+def print_summary(result: SweepResult) -> None:
+    """The closing terminal table: one row per job (capped), key metrics in edge units; at a
+    narrow console the last metric columns are dropped (all are in metrics.csv), then rows
+    become key/value blocks."""
+    from ema_cli.cli.output import print_table
     from ema_cli.report.sweep_report import metric_label
-    from ema_cli.sweep.plan import fmt
     from ema_cli.sweep.run import FAILED
 
     cfg = result.plan.cfg
     metrics = list(cfg.outputs.metrics)[:MAX_TABLE_METRICS]
+    labels = [metric_label(m) for m in metrics]
     df = result.metrics
     counts = result.counts()
-    table = Table(title=f"{cfg.name}: {len(df)} jobs ({counts['ok']} ok, {counts['diverged']} "
-                        f"diverged, {counts['failed']} failed, {counts['pending']} not run)",
-                  header_style="bold")
-    table.add_column("job", no_wrap=True)
-    table.add_column("swept values", max_width=LABEL_WIDTH, overflow="fold")
-    table.add_column("status", no_wrap=True)
-    for m in metrics:
-        table.add_column(escape(metric_label(m)), justify="right", min_width=METRIC_WIDTH)
     shown = df if len(df) <= MAX_TABLE_ROWS else df.head(MAX_TABLE_ROWS)
+    rows, styles = [], []
     for _, row in shown.iterrows():
-        style = "red" if row["status"] == FAILED else None
-        table.add_row(row["job"], escape(str(row["label"])), row["status"],
-                      *[fmt(float(row[m])) if row[m] == row[m] else "n/a" for m in metrics],
-                      style=style)
-    if len(df) > MAX_TABLE_ROWS:
-        table.caption = f"first {MAX_TABLE_ROWS} of {len(df)} jobs; all in metrics.csv"
-    return table
+        styles.append("red" if row["status"] == FAILED else None)
+        rows.append((row["job"], str(row["label"]), row["status"],
+                     *[fmt_num(float(row[m]), nan="n/a") for m in metrics]))
+    caption = (f"first {MAX_TABLE_ROWS} of {len(df)} jobs; all in metrics.csv"
+               if len(df) > MAX_TABLE_ROWS else None)
+    print_table(f"{cfg.name}: {len(df)} jobs ({counts['ok']} ok, {counts['diverged']} "
+                f"diverged, {counts['failed']} failed, {counts['pending']} not run)",
+                ("job", "swept values", "status", *labels), rows,
+                justify=["left", "left", "left"] + ["right"] * len(labels),
+                optional=labels[1:], caption=caption, where="metrics.csv", styles=styles)
 
 
 @handle_errors
@@ -104,10 +97,14 @@ def sweep_cmd(
                             "when --out is outside results/).")] = None,
     progress: Annotated[bool, typer.Option(
         "--progress/--no-progress", help="Show a progress bar with ETA (stderr).")] = True,
+    no_figures: Annotated[bool, typer.Option(
+        "--no-figures", help="Draw no figures (they can cost more than a small sweep's "
+                             "simulations); metrics.csv and signals.parquet hold the data.")
+    ] = False,
 ) -> None:
     """Run a sweep: every job of CONFIG, in parallel, cached and resumable; writes metrics.csv,
     time series, figures, summary.md and manifest.json."""
-    from ema_cli.report.sweep_report import run_sweep
+    from ema_cli.report.sweep_report import finish_sweep, run_sweep
 
     check_jobs(n_jobs, "--n-jobs")
     if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
@@ -115,17 +112,23 @@ def sweep_cmd(
     cfg, overrides = _load(config, set_)
     result = run_sweep(cfg, out, n_jobs, backend, force, progress, scheduler=scheduler,
                        cache_dir=cache_dir, base_dir=config.parent, source=str(config),
-                       overrides=overrides)
+                       overrides=overrides, figures="none" if no_figures else "background")
     for w in result.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     for n in result.plan.notes:
         console.print(f"note: {n}")
-    console.print(summary_table(result))
+    print_summary(result)
     counts = result.counts()
     t = result.timings
+    if result.pending is not None:
+        err_console.print(f"drawing {len(result.plan.cfg.outputs.figures)} kinds of figures "
+                          "(--no-figures skips them) ...")
+        finish_sweep(result)
+    figs = (f"; {len(result.figures)} figures {t['figures']:.1f} s" if "figures" in t
+            else "; no figures" if no_figures else "")
     console.print(f"{result.computed} runs computed, {result.cached} cached; backend "
                   f"{result.backend} x{result.workers}; {t.get('total', 0.0):.2f} s "
-                  f"(kernel {t.get('kernel', 0.0):.2f} s) -> {result.folder}")
+                  f"(kernel {t.get('kernel', 0.0):.2f} s){figs} -> {result.folder}")
     if counts["failed"]:
         raise EmaError(f"{counts['failed']} job(s) failed (errors in {result.folder}/"
                        "manifest.json); re-run the same command to retry them, finished jobs "
@@ -243,7 +246,6 @@ def show_cmd(
 ) -> None:
     """Print the resolved config (every default filled in) and the jobs it expands to."""
     import yaml
-    from rich.table import Table
 
     from ema_cli.sweep.plan import plan_sweep
 
@@ -251,17 +253,15 @@ def show_cmd(
     plan = plan_sweep(cfg, config.parent, str(config))
     console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip(),
                   markup=False)
-    table = Table(title=f"{len(plan.jobs)} jobs ({plan.n_unique} distinct runs); input "
-                        f"{plan.signal.describe()}, {plan.duration:g} s at dt {plan.dt:g} s",
-                  header_style="bold")
-    for col in ("job", "swept values", "key"):
-        table.add_column(col)
+    from ema_cli.cli.output import print_table
+
     jobs = plan.jobs if all_ else plan.jobs[:MAX_SHOW_JOBS]
-    for j in jobs:
-        table.add_row(j.id, escape(j.label), j.key)
-    if len(jobs) < len(plan.jobs):
-        table.caption = f"first {len(jobs)} of {len(plan.jobs)}; --all lists every job"
-    console.print(table)
+    print_table(f"{len(plan.jobs)} jobs ({plan.n_unique} distinct runs); input "
+                f"{plan.signal.describe()}, {plan.duration:g} s at dt {plan.dt:g} s",
+                ("job", "swept values", "key"), [(j.id, j.label, j.key) for j in jobs],
+                justify=["left"] * 3, optional=("key",), where="the job cache keys",
+                caption=(f"first {len(jobs)} of {len(plan.jobs)}; --all lists every job"
+                         if len(jobs) < len(plan.jobs) else None))
     for info in plan.axes:
         console.print(f"axis {info.name}: {info.description}; columns "
                       f"{', '.join(info.columns)}", markup=False)

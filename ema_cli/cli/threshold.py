@@ -8,6 +8,9 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import console, handle_errors, out_help, parse_assignments
+from ema_cli.cli.output import print_table
+from ema_cli.progress import report as report_stage
+from ema_cli.units import fmt_num
 
 DEFAULT_RTOL = 1e-3  # mirrors config.criteria.DEFAULT_RTOL (checked by a test), kept import-free
 
@@ -18,7 +21,7 @@ def threshold_cmd(
     vary: Annotated[str, typer.Option(
         "--vary", help="Nonlinearity whose magnitude is searched (paper name or type@location).")],
     range_: Annotated[tuple[float, float], typer.Option(
-        "--range", help="Search range LO HI, in the unit of `ema locations`.")],
+        "--range", metavar="LO HI", help="Search range LO HI, in the unit of `ema locations`.")],
     metric: Annotated[str | None, typer.Option(
         "--metric", help="Metric column (as in metrics.csv), with --limit.")] = None,
     limit: Annotated[float | None, typer.Option("--limit", help="Limit of --metric.")] = None,
@@ -39,8 +42,6 @@ def threshold_cmd(
 ) -> None:
     """Find by bracketing and refinement the threshold magnitude of one nonlinearity at which
     tracking metrics stay within their limits; writes threshold.json, history.csv, threshold.png."""
-    from rich.table import Table
-
     from ema_cli.api.threshold import threshold
     from ema_cli.report.rundir import check_output
 
@@ -48,14 +49,16 @@ def threshold_cmd(
     res = threshold(config, vary, range_, metric=metric, limit=limit, require=require or (),
                     direction=direction, log=not linear, rtol=rtol,
                     overrides=parse_assignments(set_, "--set"))
+    report_stage("writing files and figures")
     folder = res.save(out)
     r = res.result
-    table = Table(title=f"Threshold of {vary} [{res.unit}]")
-    for c in ("status", "threshold", "bracket", "rel. width", "simulations"):
-        table.add_column(c)
-    table.add_row(r.status, f"{r.threshold:.5g}", f"[{r.bracket[0]:.5g}, {r.bracket[1]:.5g}]",
-                  f"{r.rel_width:.2g}", str(r.n_sims))
-    console.print(table)
+    u = res.unit
+    lo, hi = (fmt_num(b, u, 5, nan="none") for b in r.bracket)
+    print_table(f"Threshold of {vary} [{u}]",
+                ("status", "threshold", "bracket", "relative width", "simulations"),
+                [(r.status, fmt_num(r.threshold, u, 5, nan="not found"), f"[{lo}, {hi}]",
+                  fmt_num(100 * r.rel_width, "%", 2), f"{r.n_sims:,}")],
+                justify=["left"] + ["right"] * 4)
     summary = res.summary
     if "threshold_percent_of_input" in summary:
         console.print(f"= {summary['threshold_percent_of_input']:.3g} % of the "

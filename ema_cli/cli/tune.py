@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.progress import report as report_stage
 
 
 @handle_errors
@@ -43,25 +44,28 @@ def tune_cmd(
         raise EmaError(f"config '{config}' is not a file (a tuning config, e.g. "
                        "configs/tune.yaml)")
     check_output(out, "tune")
-    state = {"last": -1}
+    from ema_cli.progress import report
 
     def progress(run: int, done: int, total: int) -> None:
-        pct = int(100 * done / total)
-        if pct // 10 != state["last"] // 10 or done == total:
-            state["last"] = pct
-            err_console.print(f"  run {run + 1}: {done}/{total} evaluations ({pct} %)")
+        report(f"run {run + 1}: evaluations", done, total)
 
     res = tune(config, parse_assignments(set_, "--set"), method=method, runs=runs,
-               budget=budget, progress=progress)
+               budget=budget, progress=progress,
+               log=lambda text: err_console.print(text, highlight=False))
+    report_stage("writing files and figures")
     folder = res.save(out)
     o = res.outcome
     console.print(f"[bold]{res.title}[/]")
     ref, before, after = (float(e.cost[0]) for e in (o.reference, o.before, o.after))
-    console.print(f"cost: default controller {ref:.4g}, before tuning {before:.4g}, "
-                  f"tuned {after:.4g} ({100 * (1 - after / ref):.1f} % lower); every "
-                  "constraint met", highlight=False)
-    console.print("tuned: " + ", ".join(f"{k} = {v:.5g}" for k, v in res.tuned.items()),
-                  highlight=False)
+    console.print(f"cost (relative, no unit): default controller {ref:.4g}, before tuning "
+                  f"{before:.4g}, tuned {after:.4g} ({100 * (1 - after / ref):.1f} % lower); "
+                  "every constraint met", highlight=False)
+    from ema_cli.model.params import BY_NAME
+    from ema_cli.units import fmt_num
+
+    console.print("tuned: " + ", ".join(
+        f"{k} = {fmt_num(v, BY_NAME[k].unit if k in BY_NAME else '', 5)}"
+        for k, v in res.tuned.items()), highlight=False)
     if len(o.runs) > 1:
         console.print(f"{len(o.runs)} runs: costs within {100 * o.cost_spread:.2f} %",
                       highlight=False)

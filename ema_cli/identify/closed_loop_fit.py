@@ -44,6 +44,7 @@ from ema_cli.identify.log_settings import ClosedLoopSettings
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
 from ema_cli.model.params import BY_NAME
 from ema_cli.optim.ga import GAHistory, preset, run_ga
+from ema_cli.progress import report
 
 FD_REL_STEP = 1e-4  # central-difference step, relative to max(|x|, 1e-3*(hi - lo)) [-]
 POLISH_TOL = 1e-10  # xtol/ftol/gtol of the least-squares polish [-]
@@ -323,7 +324,8 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
     stages: list[dict[str, Any]] = []
     t0 = time.perf_counter()
     if settings.polish:
-        for span in spans:  # continuation over growing horizons, the whole log last
+        for k, span in enumerate(spans):  # continuation over growing horizons, the whole log last
+            report(f"polish over {span:g} s", k, len(spans))
             t1 = time.perf_counter()
             res, nj = polish(problem.prefix(span), x, settings.max_iter)
             x, status = res.x, str(res.message)
@@ -336,6 +338,7 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
     timings["polish_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
+    report("uncertainty and alpha profile")
     r, J = fd_jacobian(problem, x)
     grid = slc = prof = None
     if "alpha" in problem.names:

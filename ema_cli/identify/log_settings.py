@@ -60,7 +60,7 @@ class ClosedLoopGA(Strict):
 class ClosedLoopSettings(Strict):
     """Everything one ``ema identify --closed-loop`` run needs."""
 
-    name: PlainName = Field("identify-closed-loop", description="study name (a folder name)")
+    name: PlainName = Field("closed-loop", description="study name (a folder name)")
     data: str | None = Field(None, description="the log: CSV with t_s, theta_ref_deg, "
                                                "theta_load_deg [, omega_motor_rpm, current_a, "
                                                "voltage_cmd_v]")
@@ -123,7 +123,7 @@ class ClosedLoopSettings(Strict):
 class FrictionSweepSettings(Strict):
     """Everything one ``ema identify --friction-sweep`` run needs."""
 
-    name: PlainName = Field("identify-friction-sweep", description="study name (a folder name)")
+    name: PlainName = Field("friction-sweep", description="study name (a folder name)")
     data: str | None = Field(None, description="CSV with omega_rpm, torque_nm")
     delta: PositiveFloat = Field(1.0, le=10, description="Stribeck exponent, fixed [-]")
     vs_range: tuple[PositiveFloat, PositiveFloat] | None = Field(

@@ -241,7 +241,10 @@ def run_ga(problem: Problem, options: GAOptions, rng: np.random.Generator) -> GA
     ever_x, ever_cost = X[0].copy(), np.inf
     stale, stopped, n_gen = 0, False, 0
 
+    from ema_cli.progress import report
+
     for gen in range(o.generations):
+        report("GA generation", gen + 1, o.generations)
         if gen > 0:
             order = np.argsort(cost, kind="stable")
             elite = order[: o.elitism]

@@ -67,7 +67,9 @@ def _freq(run: Any, test: Any, title: str) -> Figure:
     ax = fig.axes[0]
     if "bandwidth" in test.limits:
         _limit_line(ax, test.limits["bandwidth"], "Hz", horizontal=False)
-        ax.legend(title="amplitude", fontsize=8, loc="lower left")
+        from ema_cli.report.figures import legend_outside
+
+        legend_outside(ax, title="amplitude")
     return fig
 
 
@@ -125,14 +127,17 @@ def _hysteresis(run: Any, test: Any, title: str) -> Figure:
 def _deflection(run: Any, test: Any, title: str) -> Figure:
     d = run.data
     fig, ax = subplots(1, 1, figsize=(9, 6))
-    ax.plot(d["torque"], d["load"] / DEG, "C0", lw=1.2, label="load angle (motor locked)")
+    ax.plot(d["torque"], d["load"] / DEG, "C0", lw=3.5, alpha=0.45,
+            label="load angle (motor locked)")
     T = np.linspace(-test.torque_nm, test.torque_nm, 3)
-    for b, side in ((d["b_pos"], T >= 0), (d["b_neg"], T <= 0)):
-        ax.plot(T[side], (d["slope"] * T[side] + b) / DEG, "k--", lw=1)
+    for k, (b, side) in enumerate(((d["b_pos"], T >= 0), (d["b_neg"], T <= 0))):
+        # drawn over the data, thin and dark: the fit lies on the measured curve
+        ax.plot(T[side], (d["slope"] * T[side] + b) / DEG, color="C3", ls="--", lw=1.6,
+                marker="o", ms=5, zorder=3, label="fitted lines" if k == 0 else None)
     k = run.values("stiffness")[0].value
     play = run.values("free_play")[0].value / DEG
     _lines(ax, f"{title}\n{run.name}: load deflection, stiffness {k:.4g} N*m/rad, free play "
-               f"{play:.4g} deg (dashed: fitted lines)", "load torque [N*m]",
+               f"{play:.4g} deg", "load torque [N*m]",
            "load angle [deg]")
     ax.legend(fontsize=8, loc="upper left")
     return fig
@@ -179,13 +184,13 @@ def test_figure(run: Any, test: Any, title: str) -> Figure:
 
 
 def fmt_value(v: float | None) -> str:
+    """A measured value or limit (4 significant digits; "not measured" for NaN, the infinity
+    sign for an infinite value, e.g. a margin without crossover), without its unit."""
+    from ema_cli.units import fmt_num
+
     if v is None:
         return ""
-    if isinstance(v, float) and math.isinf(v):
-        return "∞" if v > 0 else "-∞"
-    if isinstance(v, float) and math.isnan(v):
-        return "NaN"
-    return f"{v:.4g}"
+    return fmt_num(v, nan="not measured", inf="∞", neg_inf="-∞")
 
 
 def fmt_limit(v: Any) -> str:

@@ -16,6 +16,58 @@ def subplots(nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = (8.0
     return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
+LINE_STYLES = (("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"),
+               ((0, (1, 3)), "P"))
+"""(line style, marker) of the k-th of several curves that may coincide: each stays visible
+when another lies exactly on it (different dashes, markers at staggered points)."""
+
+
+def curve_style(k: int, n_points: int, n_curves: int) -> dict[str, Any]:
+    """Matplotlib keywords for the k-th of ``n_curves`` curves of ``n_points`` points: colour
+    ``C<k>``, a distinct line style, and markers at points staggered between the curves."""
+    ls, marker = LINE_STYLES[k % len(LINE_STYLES)]
+    every = max(n_points // 8, n_curves, 1)
+    start = (k * every) // max(n_curves, 1)
+    return {"color": f"C{k % 10}", "ls": ls, "marker": marker, "ms": 5, "mfc": "none",
+            "markevery": (start, every), "lw": 1.4}
+
+
+def coinciding(curves: Mapping[str, Any], tol: float) -> list[list[str]]:
+    """Groups (of two or more labels) of curves that lie on each other: every finite point
+    within ``tol`` (in the curves' unit) of the group's first curve. Curves of other lengths
+    never coincide."""
+    import numpy as np
+
+    groups: list[list[str]] = []
+    for name, y in curves.items():
+        y = np.asarray(y, dtype=float)
+        for g in groups:
+            ref = np.asarray(curves[g[0]], dtype=float)
+            if ref.shape == y.shape:
+                both = np.isfinite(ref) & np.isfinite(y)
+                same = np.array_equal(np.isfinite(ref), np.isfinite(y))
+                if same and both.any() and float(np.max(np.abs(ref[both] - y[both]))) <= tol:
+                    g.append(name)
+                    break
+        else:
+            groups.append([name])
+    return [g for g in groups if len(g) > 1]
+
+
+def coincidence_note(groups: Sequence[Sequence[str]], tol: float, unit: str) -> str:
+    """Words for :func:`coinciding`'s groups, e.g. ``0.1 deg = 1 deg = linear model (within
+    0.05 dB)``; empty when none coincide."""
+    if not groups:
+        return ""
+    return "; ".join(" = ".join(g) for g in groups) + f" (within {tol:g} {unit})"
+
+
+def legend_outside(ax: Any, **kwargs: Any) -> Any:
+    """A legend to the right of ``ax``, off the data (the figure keeps room for it)."""
+    kwargs.setdefault("fontsize", 8)
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
+
+
 def tracking_figure(ts: Mapping[str, Any], title: str) -> Figure:
     """Position and velocity: reference and response (top), their errors (bottom), vs time.
 

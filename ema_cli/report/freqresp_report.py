@@ -18,41 +18,69 @@ OUTPUT_FILES = ("config.resolved.yaml", "freqresp.csv", "freqresp.json", "bode.p
                 "summary.md", "manifest.json")
 
 
+GAIN_TOL_DB = 0.05  # gain curves closer than this everywhere are reported as coinciding [dB]
+PHASE_TOL_DEG = 0.5  # phase curves closer than this everywhere coincide [deg]
+
+
 def bode_figure(res: Any, title: str) -> Figure:
-    """Gain and phase of the load angle vs frequency, one curve per amplitude (markers where a
-    limit was reached), the linear model dashed; THD below."""
-    fig, axes = subplots(3, 1, figsize=(10, 10), sharex=True)
+    """Gain and phase of the load angle vs frequency, one curve per amplitude (distinct line
+    styles and markers, so that curves lying on each other stay visible; circles where a limit
+    was reached), the linear model in black; THD below. The legend, outside the axes, says
+    which curves coincide (computed, within GAIN_TOL_DB / PHASE_TOL_DEG)."""
+    from ema_cli.report.figures import coincidence_note, coinciding, curve_style, legend_outside
+
+    fig, axes = subplots(3, 1, figsize=(11, 10), sharex=True)
     f = res.f_hz
-    axes[0].semilogx(f, 20 * np.log10(np.abs(res.linear)), "k--", lw=1.2, label="linear model")
-    axes[1].semilogx(f, np.degrees(np.unwrap(np.angle(res.linear))), "k--", lw=1.2)
+    n_curves = len(res.amplitudes) + 1
+    lin_g = 20 * np.log10(np.abs(res.linear))
+    lin_ph = np.degrees(np.unwrap(np.angle(res.linear)))
+    gains, phases = {}, {}
     for k, a in enumerate(res.amplitudes):
         blk = res.block(a)
         g = np.array([p.gain_db for p in blk])
         ph = np.array([p.phase_deg for p in blk])
         thd = np.array([p.thd_pct for p in blk])
         lim = np.array([bool(p.limits) for p in blk])
-        color = f"C{k}"
-        axes[0].semilogx(f, g, "-", color=color, lw=1.4, label=f"{a:g} deg")
-        axes[1].semilogx(f, ph, "-", color=color, lw=1.4)
-        axes[2].loglog(f, np.maximum(thd, 1e-6), "-", color=color, lw=1.2)
+        style = curve_style(k, len(f), n_curves)
+        label = f"{a:g} deg"
+        gains[label], phases[label] = g, ph
+        axes[0].semilogx(f, g, label=label, **style)
+        axes[1].semilogx(f, ph, **style)
+        axes[2].loglog(f, np.maximum(thd, 1e-6), **style)
         if lim.any():
-            axes[0].semilogx(f[lim], g[lim], "o", color=color, ms=4, mfc="none")
+            axes[0].semilogx(f[lim], g[lim], "o", color=style["color"], ms=9, mfc="none",
+                             lw=0)
+    gains["linear model"], phases["linear model"] = lin_g, lin_ph
+    lin = {**curve_style(len(res.amplitudes), len(f), n_curves), "color": "k", "marker": "x",
+           "ls": (0, (2, 2)), "lw": 1.0}
+    axes[0].semilogx(f, lin_g, label="linear model", **lin)
+    axes[1].semilogx(f, lin_ph, **lin)
     axes[0].axhline(-3, color="0.5", lw=0.8, ls=":")
     axes[1].axhline(-90, color="0.5", lw=0.8, ls=":")
     axes[0].set_ylabel("gain theta_L/theta_ref [dB]")
     axes[1].set_ylabel("phase [deg]")
     axes[2].set_ylabel("harmonic distortion [%]")
     axes[2].set_xlabel("frequency [Hz]")
-    axes[0].set_title("Gain (circles: a limit reached; dotted: -3 dB)")
+    axes[0].set_title("Gain (large circles: a limit reached; dotted: -3 dB)")
     axes[1].set_title("Phase (dotted: -90 deg)")
     axes[2].set_title("Total harmonic distortion of the load angle (harmonics 2-10)")
-    axes[0].legend(title="amplitude", fontsize=8, loc="lower left")
+    notes = [f"{what}: {n}" for what, n in (
+        ("gain", coincidence_note(coinciding(gains, GAIN_TOL_DB), GAIN_TOL_DB, "dB")),
+        ("phase", coincidence_note(coinciding(phases, PHASE_TOL_DEG), PHASE_TOL_DEG, "deg")))
+        if n]
+    legend_outside(axes[0], title="amplitude")
+    if notes:
+        import textwrap
+
+        text = "curves on each other\n(markers staggered):\n" + "\n".join(
+            textwrap.fill(n, 26) for n in notes)
+        axes[1].text(1.01, 1.0, text, transform=axes[1].transAxes, va="top", ha="left",
+                     fontsize=8, bbox={"boxstyle": "round", "fc": "0.95", "ec": "0.7"})
     for a in axes:
         a.grid(True, which="both", alpha=0.3)
     fig.suptitle(title)
-    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.06, top=0.92, hspace=0.3)
+    fig.subplots_adjust(left=0.08, right=0.79, bottom=0.06, top=0.92, hspace=0.3)
     return fig
-
 
 def _fmt(v: Any) -> str:
     if isinstance(v, float):

@@ -176,18 +176,73 @@ def check_output(out: Path | None, command: str, fingerprint: str | None = None,
     return False
 
 
+LATEST = "latest"
+"""The symlink in ``results/<command>/<config-name>/`` to the newest run folder there."""
+
+
+def default_folder(command: str, name: str) -> Path:
+    """``results/<command>/<config-name>/``: where the default run folders of a command and a
+    config go (``name`` made safe for a folder name)."""
+    import re
+
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "-", str(name)).strip(".-") or "default"
+    return RESULTS_ROOT / command / safe
+
+
+def _unfinished(parent: Path, command: str, fingerprint: str) -> Path | None:
+    """The newest unfinished run folder of ``command`` with ``fingerprint`` under ``parent``."""
+    if not parent.is_dir():
+        return None
+    found = []
+    for p in parent.iterdir():
+        if p.is_symlink() or not p.is_dir() or f"_{fingerprint[:8]}" not in p.name:
+            continue
+        mark = _read_marker(p)
+        if (mark is not None and mark.get("command") == command
+                and mark.get("fingerprint") == fingerprint and not mark.get("finished")):
+            found.append(p)
+    return max(found, key=lambda p: p.name) if found else None
+
+
+def point_latest(folder: Path) -> None:
+    """Point ``folder.parent/latest`` at ``folder`` (a relative symlink, replaced atomically:
+    a reader sees the old or the new link, never none). Best effort: a file system without
+    symlinks only loses the convenience."""
+    import contextlib
+    import secrets
+
+    link = folder.parent / LATEST
+    tmp = folder.parent / f".{LATEST}.{secrets.token_hex(4)}.tmp"
+    with contextlib.suppress(OSError):
+        if link.exists() and not link.is_symlink():
+            return  # a real folder named 'latest': never replaced
+        os.symlink(folder.name, tmp, target_is_directory=True)
+        try:
+            os.replace(tmp, link)
+        except OSError:
+            tmp.unlink()
+
+
 def prepare_output(command: str, name: str, fingerprint: str, out: Path | None = None,
                    resume: bool = False) -> tuple[Path, bool]:
     """The one output-folder policy of every command -> (folder, resumed).
 
-    ``out`` None: a new folder ``results/<name>/<stamp>_<hash>/``. A given ``out`` must be new
+    ``out`` None: a new folder ``results/<command>/<name>/<stamp>_<hash>/`` (``name``: the
+    config's name), and ``results/<command>/<name>/latest`` points at it; with ``resume``, an
+    unfinished run of the same inputs there is continued instead. A given ``out`` must be new
     or empty: earlier results are never overwritten. The one exception, when ``resume`` is
     set, is an unfinished run of the same ``command`` with the same ``fingerprint`` (the hash of
     its resolved inputs), which is continued. Errors name ``--out`` and what was expected.
     """
+    default = out is None
     if out is None:
+        parent = default_folder(command, name)
+        earlier = _unfinished(parent, command, fingerprint) if resume else None
+        if earlier is not None:
+            point_latest(earlier)
+            return earlier, True
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        out = RESULTS_ROOT / name / f"{stamp}_{fingerprint[:8]}"
+        out = parent / f"{stamp}_{fingerprint[:8]}"
         k = 1
         base = out
         while out.exists():
@@ -205,6 +260,8 @@ def prepare_output(command: str, name: str, fingerprint: str, out: Path | None =
     write_json(out / MARKER, {"command": command, "fingerprint": fingerprint,
                               "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
                               "finished": False})
+    if default:
+        point_latest(out)
     return out, False
 
 

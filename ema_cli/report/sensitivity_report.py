@@ -1,6 +1,6 @@
 """A sensitivity study's output folder: indices, convergence, samples, figures, summary, manifest.
 
-Layout of ``results/<name>/<stamp>_<hash>/`` (or ``--out``)::
+Layout of ``results/sensitivity/<name>/<stamp>_<hash>/`` (or ``--out``)::
 
     config.resolved.yaml     the validated config, every default filled in
     indices.csv              input, metric, transform, factor, S1, S1_conf, ST, ST_conf,
@@ -280,8 +280,9 @@ def run_sensitivity(
     """Run a sensitivity study end to end and write its folder (``write`` False: nothing is
     written, and no job cache unless ``cache_dir`` is given).
 
-    out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
-               reused only if it holds an unfinished study of the same config, method and n
+    out        output folder; None: ``results/sensitivity/<name>/<stamp>_<hash>/``. An
+               existing folder is reused only if it holds an unfinished study of the same
+               config, method and n
                (resumed: finished samples come from the job cache)
     cache_dir  job cache; None: ``sweep_report.default_cache_dir(out)`` when writing
 

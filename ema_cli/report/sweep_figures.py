@@ -44,6 +44,27 @@ def _curve_style(label: str, k: int) -> dict[str, object]:
     return {"color": f"C{k % 10}", "ls": "-", "lw": 1.3, "label": label}
 
 
+COINCIDE_SHARE = 0.005  # curves closer than this share of the panel's span everywhere coincide
+
+
+def _note_coinciding(ax: Axes, series: Sequence[tuple[str, pd.DataFrame]], col: str) -> None:
+    """Say in the panel's title which curves lie on each other (computed: every sample within
+    COINCIDE_SHARE of the span of all curves), so that none seems missing."""
+    from ema_cli.report.figures import coinciding
+
+    curves = {label: ts[col].to_numpy(float) for label, ts in series}
+    vals = np.concatenate(list(curves.values()))
+    vals = vals[np.isfinite(vals)]
+    if vals.size < 2 or len(curves) < 2:
+        return
+    span = float(vals.max() - vals.min())
+    groups = coinciding(curves, COINCIDE_SHARE * span) if span > 0 else [list(curves)]
+    if groups:
+        text = "; ".join(" = ".join(g) for g in groups)
+        ax.set_title(textwrap.fill(f"on each other (within {100 * COINCIDE_SHARE:g} % of "
+                                   f"the span): {text}", 100), fontsize=8)
+
+
 def _tail_limits(ax: Axes, series: Sequence[tuple[str, pd.DataFrame]], col: str,
                  t0: float) -> None:
     vals = np.concatenate([ts.loc[ts["t_s"] >= t0, col].to_numpy() for _, ts in series])
@@ -75,6 +96,8 @@ def overlay_figure(series: Sequence[tuple[str, pd.DataFrame]], title: str,
                 ax.plot(ts0["t_s"], ts0[ref], color="k", ls=":", lw=1.6, label="reference")
             for k, (label, ts) in enumerate(series):
                 ax.plot(ts["t_s"], ts[col], **_curve_style(label, k))
+            if side == 0:
+                _note_coinciding(ax, series, col)
             ax.grid(True, alpha=0.3)
             ax.axhline(0.0, color="0.6", lw=0.6)
             if side == 1:
@@ -86,9 +109,15 @@ def overlay_figure(series: Sequence[tuple[str, pd.DataFrame]], title: str,
         if row == n - 1:
             for ax in axes[row]:
                 ax.set_xlabel("time [s]")
-    axes[0, 0].legend(title=legend_title, fontsize=8, title_fontsize=8, loc="best")
+    # the legend below the panels, off the data (it once sat on the curves)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    ncol = min(len(labels), 4) or 1
+    height = fig.get_figheight()
+    space = (0.35 + 0.2 * math.ceil(len(labels) / ncol)) / height
     fig.suptitle(_title(title))
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, space, 1, 1))
+    fig.legend(handles, labels, loc="lower center", bbox_to_anchor=(0.5, 0.0), ncol=ncol,
+               fontsize=8, title=legend_title, title_fontsize=8, frameon=False)
     return fig
 
 
@@ -126,9 +155,9 @@ def metric_figure(frame: pd.DataFrame, x_column: str, x_label: str,
                     ms=4 if len(x) <= MARKER_MAX_POINTS else 2, lw=1.3,
                     label=None if name is None else str(name))
         n_nan = int(sum(np.isnan(y).sum() for y in all_y))
-        if 0 < n_nan < sum(y.size for y in all_y):
-            ax.text(0.02, 0.97, f"{n_nan} run(s) n/a (e.g. not settled)", fontsize=7,
-                    color="0.4", transform=ax.transAxes, va="top")
+        note = ""
+        if 0 < n_nan < sum(y.size for y in all_y):  # in the title, off the data
+            note = f"\n{n_nan} of {sum(y.size for y in all_y)} runs n/a (e.g. not settled)"
         if baseline is not None and np.isfinite(baseline[col]):
             ax.axhline(float(baseline[col]), label=baseline_label, **BASELINE_STYLE)
             all_y.append(np.array([float(baseline[col])]))
@@ -145,7 +174,7 @@ def metric_figure(frame: pd.DataFrame, x_column: str, x_label: str,
                     transform=ax.transAxes, ha="center", va="center", fontsize=8, color="0.4")
         if _log_y(np.concatenate(all_y)):
             ax.set_yscale("log")
-        ax.set_title(label, fontsize=9)
+        ax.set_title(label + note, fontsize=9)
         ax.set_xlabel(x_label, fontsize=8)
         ax.tick_params(labelsize=8)
         ax.grid(True, which="both", alpha=0.3)

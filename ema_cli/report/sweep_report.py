@@ -1,6 +1,6 @@
 """A sweep's output folder: resolved config, manifest, metrics.csv, signals, figures, summary.
 
-Layout of ``results/<name>/<stamp>_<hash>/`` (or ``--out``)::
+Layout of ``results/sweep/<name>/<stamp>_<hash>/`` (or ``--out``)::
 
     config.resolved.yaml      the validated config, every default filled in
     manifest.json             version, git commit, seed, job counts, timings, per-job status
@@ -170,10 +170,11 @@ def run_sweep(
     overrides: Sequence[tuple[str, Any]] = (),
     write: bool = True,
     reuse_finished: bool = False,
+    figures: str = "draw",
 ) -> SweepResult:
     """Run a sweep end to end (``sweep.run.compute_sweep``) and write its outputs.
 
-    out        output folder; None: ``results/<name>/<stamp>_<hash>/``. An existing folder is
+    out        output folder; None: ``results/sweep/<name>/<stamp>_<hash>/``. An existing folder is
                reused only if it holds an earlier run of the same sweep (resume in place).
     cache_dir  job cache; None: :func:`default_cache_dir` when writing (``results/.cache/
                sweep``, or ``OUT/.cache`` when ``out`` is outside results/), no cache otherwise
@@ -183,6 +184,10 @@ def run_sweep(
     reuse_finished  ``out`` belongs to a run being resumed (``ema reproduce``): if it holds the
                finished run of this very sweep, it is read (metrics from the job cache, signals
                from its signals.parquet), never rewritten; otherwise the usual policy applies
+
+    figures    draw: the figures are drawn before this returns; none: no figures (the
+               manifest says so); background: drawn in a thread while the caller prints, the
+               folder finished by :func:`finish_sweep`, which the caller must then call
 
     The other arguments are ``compute_sweep``'s. The folder is created once the sweep is
     planned, before any job runs; signals.parquet is streamed as chunks finish and renamed
@@ -231,7 +236,8 @@ def run_sweep(
                     result.signals_file = writer.commit()
                 except EmaError as exc:  # e.g. disk full: the other outputs are still written
                     failed = exc
-            write_outputs(result, partial=aborted or failed is not None)
+            write_outputs(result, partial=aborted or failed is not None,
+                          figures=figures == "draw")
         except KeyboardInterrupt:  # Ctrl-C while writing: the manifest still says so
             result.interrupted = True
             raise
@@ -243,7 +249,11 @@ def run_sweep(
             write_manifest(result, overrides, failed.message if failed else None)
         if failed is not None:
             raise failed
-        if not aborted:
+        if aborted:
+            return
+        if figures == "background" and result.plan.cfg.outputs.figures:
+            result.pending = _FigureThread(result, overrides)
+        else:
             _finish_if_complete(result)
 
     return compute_sweep(cfg, n_jobs, backend, force, progress, scheduler=scheduler,
@@ -253,10 +263,63 @@ def run_sweep(
                          keep_signals=not (write and cfg.outputs.timeseries))
 
 
+class _FigureThread:
+    """The figures of a finished sweep, drawn in a thread of this process (Agg, no pyplot
+    state shared with another thread) while the caller prints its summary; the manifest and
+    the finished mark are written when :func:`finish_sweep` joins it. (A forked
+    ``figure_worker`` cannot serve here: numba's native threads are running by then.)"""
+
+    def __init__(self, result: SweepResult, overrides: Sequence[tuple[str, Any]]) -> None:
+        import threading
+
+        self.result, self.overrides = result, overrides
+        self.paths: list[Path] = []
+        self.error: BaseException | None = None
+        self.seconds = 0.0
+        self.thread = threading.Thread(target=self._run, name="ema-figures", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        t0 = time.perf_counter()
+        try:
+            assert self.result.folder is not None
+            self.paths = _write_figures(self.result, self.result.folder / "figures")
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+            self.error = exc
+        self.seconds = time.perf_counter() - t0
+
+    def join(self) -> None:
+        """Wait for the figures, then write the manifest and mark the folder finished."""
+        self.thread.join()
+        result = self.result
+        result.figures = self.paths
+        result.timings["figures"] = self.seconds
+        error = None
+        if self.error is not None:
+            error = f"the figures could not be drawn: {type(self.error).__name__}: " \
+                    f"{' '.join(str(self.error).split())[:200]}"
+        if self.paths:  # summary.md links the figures
+            assert result.folder is not None
+            write_text(result.folder / "summary.md", summary_markdown(result))
+        write_manifest(result, self.overrides, error)
+        if error is not None:
+            raise EmaError(error, 1)
+        _finish_if_complete(result)
+
+
+def finish_sweep(result: SweepResult) -> None:
+    """Wait for figures drawn in the background (``run_sweep(figures="background")``), write
+    the final manifest and mark the folder finished; nothing to do otherwise."""
+    pending = getattr(result, "pending", None)
+    if pending is not None:
+        result.pending = None
+        pending.join()
+
+
 def save_sweep(result: SweepResult, out: Path | None = None,
                overrides: Sequence[tuple[str, Any]] = ()) -> Path:
     """Write the folder ``ema sweep`` writes for a sweep computed without one (the Python
-    API's ``Sweep.save``) -> the folder; ``out`` None: a new one under ``results/<name>/``."""
+    API's ``Sweep.save``) -> the folder; ``out`` None: a new one under ``results/sweep/<name>/``."""
     t0 = time.perf_counter()
     plan = result.plan
     folder = result.folder = prepare_folder(plan, out, overrides)
@@ -629,10 +692,11 @@ def write_manifest(result: SweepResult, overrides: Sequence[tuple[str, Any]],
         **({"error": error} if error else {}), jobs=jobs))
 
 
-def write_outputs(result: SweepResult, partial: bool = False) -> None:
+def write_outputs(result: SweepResult, partial: bool = False, figures: bool = True) -> None:
     """Write metrics.csv, the per-job CSVs (if asked), the figures and summary.md (then call
     :func:`write_manifest`; signals.parquet is already in place). ``partial`` (an aborted
-    sweep): only metrics.csv and summary.md.
+    sweep): only metrics.csv and summary.md; ``figures`` False: no figures (none asked, or
+    drawn elsewhere).
     """
     folder = result.folder
     assert folder is not None
@@ -640,7 +704,8 @@ def write_outputs(result: SweepResult, partial: bool = False) -> None:
     if not partial:
         if result.plan.cfg.outputs.per_job_csv and result.plan.dec > 0:
             _write_job_csvs(result, folder / "timeseries")
-        result.figures = _write_figures(result, folder / "figures")
+        if figures:
+            result.figures = _write_figures(result, folder / "figures")
     write_text(folder / "summary.md", summary_markdown(result))
 
 

@@ -25,6 +25,7 @@ from ema_cli.config.run import InputConfig, RunConfig
 from ema_cli.config.sensitivity import SensitivityConfig, check_sobol_n
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
+from ema_cli.progress import BIG_RUN, announce, estimate
 from ema_cli.sensitivity.analyze import check_output, convergence, empty_table, indices
 from ema_cli.sensitivity.sampling import Design, FactorRange, sample
 from ema_cli.sweep.run import DIVERGED, OK, SweepResult, compute_sweep
@@ -259,6 +260,15 @@ def compute_sensitivity(
                                source=source)
     if on_start is not None:
         on_start(result)
+    total = design.n_rows * len(studies)
+    if total > BIG_RUN:
+        from ema_cli.sweep.run import resolve_workers
+
+        sim = studies[0][2].simulation
+        workers = resolve_workers(n_jobs if n_jobs is not None else cfg.parallel.n_jobs)
+        announce(estimate(total, round(sim.duration_s / sim.dt_s), workers)
+                 + f" in all: {len(studies)} input(s) x {design.n_rows:,} ({method}, n = {n}; "
+                 "--n sets it; cached samples are skipped)")
     aborted = True
     try:
         for name, inp, study in studies:

@@ -22,6 +22,7 @@ import pandas as pd
 
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
+from ema_cli.progress import announce_size
 from ema_cli.sim.runner import check_memory
 from ema_cli.sim.tables import MET, METRICS, N_METRICS, N_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import JobCache, SignalsRule, signals_rule
@@ -80,6 +81,7 @@ class SweepResult:
     interrupted: bool = False
     timings: dict[str, float] = field(default_factory=dict)
     figures: list[Path] = field(default_factory=list)
+    pending: Any = None  # figures still being drawn (report.sweep_report.finish_sweep)
     signals_file: Path | None = None
     cache_corrupt: int = 0
     memory: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
@@ -191,7 +193,11 @@ class _Progress:
     """A rich progress bar with ETA (or nothing when ``enabled`` is False)."""
 
     def __init__(self, total: int, enabled: bool, label: str) -> None:
+        from ema_cli.progress import report
+
         self.bar = None
+        if total > 0:
+            report("simulations", 0, total, bar=enabled)
         if enabled and total > 0:
             from rich.console import Console
             from rich.progress import (
@@ -393,6 +399,7 @@ def compute_sweep(
         t0 = time.perf_counter()
         pending = _lookup(cache, by_key, force, plan.dec, n_out, finish, hand_on)
         pending.sort(key=first.__getitem__)
+        announce_size(len(pending), plan.n_steps, workers)
         cached = len(by_key) - len(pending)
         if cache is not None and cache.corrupt:
             run_warnings.append(_corrupt_warning(cache))

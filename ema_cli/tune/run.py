@@ -105,6 +105,34 @@ def evaluations_for(method: str, budget: int, pop: int, n_var: int, polish: floa
     return used + (budget - used) // step * step
 
 
+def explain_budget(method: str, budget: int, pop: int, n_var: int, polish: float = 0.0,
+                   local: str = "cma") -> str:
+    """How ``budget`` evaluations per run become the evaluations a run spends: whole
+    generations of the global optimiser on its share, then whole iterations of the local
+    search (:func:`evaluations_for`), e.g. ``budget 200 -> 190 evaluations per run: ...``."""
+    glob, share = split_budget(budget, polish)
+    if method == "de":
+        members, gens = DEOptions(pop=pop, budget=glob).sizes(n_var)
+        used = members * (gens + 1)
+        parts = [f"DE {gens + 1} generations of {members} = {used} (of its {glob})"]
+    else:
+        gens = generations_for(glob, pop)
+        used = pop + (gens - 1) * (pop - GA_ELITES)
+        parts = [f"GA {gens} generations: {pop} + {gens - 1} x {pop - GA_ELITES} new "
+                 f"({GA_ELITES} elites kept) = {used} (of its {glob})"]
+    total = used
+    if polish > 0:
+        step = default_lam(n_var) if local == "cma" else 2 * n_var
+        n_it = (budget - used) // step
+        total = used + n_it * step
+        parts.append(f"{local} polish {n_it} iterations of {step} = {n_it * step} (of the "
+                     f"remaining {budget - used})")
+    rest = budget - total
+    tail = (f"; {rest} left unspent: only whole generations and iterations run" if rest
+            else "")
+    return f"budget {budget} -> {total} evaluations per run: {'; '.join(parts)}{tail}"
+
+
 def split_budget(budget: int, polish: float) -> tuple[int, int]:
     """(global optimiser's share, local polish's share) of ``budget`` evaluations."""
     local = int(round(budget * polish))

@@ -42,7 +42,9 @@ def test_deadzone2_config_writes_every_output(tmp_path, monkeypatch):
     r = invoke("sweep", "deadzone2.yaml", "--set", "simulation.duration_s=0.1", "--n-jobs", "2",
                "--no-progress")
     assert r.exit_code == 0, r.output
-    (run,) = (tmp_path / "results" / "deadzone2").iterdir()
+    runs = tmp_path / "results" / "sweep" / "deadzone2"  # results/<command>/<config-name>/
+    (run,) = (p for p in runs.iterdir() if p.name != "latest")
+    assert (runs / "latest").is_symlink() and (runs / "latest").resolve() == run.resolve()
     assert "deadzone2: 4 jobs (4 ok, 0 diverged, 0 failed, 0 not run)" in flat(r.output)
     cfg = yaml.safe_load((run / "config.resolved.yaml").read_text())
     assert cfg["simulation"]["duration_s"] == 0.1 and cfg["parallel"]["backend"] == "auto"
@@ -74,7 +76,7 @@ def test_deadzone2_config_writes_every_output(tmp_path, monkeypatch):
     assert man["signals_cache"]["cached"] is False and (tmp_path / "results" / ".cache").is_dir()
     r = invoke("sweep", "deadzone2.yaml", "--set", "simulation.duration_s=0.1", "--no-progress")
     assert r.exit_code == 0, r.output
-    assert len(list((tmp_path / "results" / "deadzone2").iterdir())) == 2  # never overwritten
+    assert len([p for p in runs.iterdir() if p.name != "latest"]) == 2  # never overwritten
     assert "4 runs computed, 0 cached" in flat(r.output)
     r = invoke("sweep", "deadzone2.yaml", "--set", "simulation.duration_s=0.1", "--set",
                "outputs.timeseries=false", "--set", "outputs.figures=[metrics]", "--no-progress")

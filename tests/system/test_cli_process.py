@@ -55,3 +55,22 @@ def test_usage_errors_are_one_line(tmp_path):
         assert lines[0].startswith("error:") and needle in lines[0]
     r = ema(cwd=tmp_path)
     assert r.returncode == 0 and "Commands" in r.stdout
+
+
+def test_a_pipe_gets_80_columns_and_the_default_folder_layout(tmp_path):
+    """In a pipe (no terminal, no COLUMNS) every table fits 80 columns; the default folder is
+    results/<command>/<config-name>/<stamp>_<hash> with a `latest` link beside it."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    for args in (("locations",), ("params",), ("margins",)):
+        r = subprocess.run([str(EMA), *args], capture_output=True, text=True, cwd=tmp_path,
+                           timeout=300, env=env)
+        assert r.returncode == 0, r.stderr
+        lines = r.stdout.splitlines()
+        assert lines and max(len(x) for x in lines) <= 80, args
+        assert "…" not in r.stdout
+    runs = tmp_path / "results" / "margins" / "default"
+    (run,) = (p for p in runs.iterdir() if p.name != "latest")
+    assert (runs / "latest").is_symlink() and os.readlink(runs / "latest") == run.name
+    assert (runs / "latest" / "margins.json").is_file()

@@ -233,7 +233,7 @@ def test_the_default_cache_follows_the_output_folder(tmp_path, monkeypatch):
     assert res.cache is not None and res.cache.root == tmp_path / "out" / ".cache"
     assert (tmp_path / "out" / ".cache" / DB_NAME).is_file()
     assert not (tmp_path / "results").exists()
-    res = run_sweep(cfg, None, n_jobs=1, progress=False)  # results/<name>/<stamp>: shared cache
+    res = run_sweep(cfg, None, n_jobs=1, progress=False)  # results/sweep/<name>/...: shared cache
     assert res.cache is not None and res.cache.root == DEFAULT_CACHE_DIR
     assert res.cached == 0 and res.computed == 4  # another cache
     assert (tmp_path / DEFAULT_CACHE_DIR / DB_NAME).is_file()

@@ -142,21 +142,49 @@ def test_new_run_dir_naming_and_no_overwrite(tmp_path, monkeypatch):
     data = {"name": "s1", "plant": {"kL": 600}, "seed": 0}
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
     first = new_run_dir("s1", data, command="simulate")
-    assert first == tmp_path / "results" / "s1" / f"20240517-130405_{digest[:8]}"
+    # results/<command>/<config-name>/<stamp>_<hash>, and latest pointing at it
+    assert first == tmp_path / "results" / "simulate" / "s1" / f"20240517-130405_{digest[:8]}"
     assert [p.name for p in first.iterdir()] == [rundir.MARKER]  # only the marker
     assert _marker(first) == {"command": "simulate", "fingerprint": digest[:16],
                               "created": "2024-05-17T13:04:05+00:00", "finished": False}
+    latest = first.parent / rundir.LATEST
+    assert latest.is_symlink() and os.readlink(latest) == first.name  # relative
     # the same second and data: a numbered sibling, never the same folder
-    second = new_run_dir("s1", data)
-    third = new_run_dir("s1", data)
+    second = new_run_dir("s1", data, command="simulate")
+    third = new_run_dir("s1", data, command="simulate")
     assert second.name == f"20240517-130405_{digest[:8]}-1" and third.name.endswith("-2")
     assert len({first, second, third}) == 3 and all(p.is_dir() for p in (second, third))
-    assert _marker(second)["command"] == "s1"  # no command given: the name
+    assert latest.resolve() == third.resolve()  # the newest
+    assert _marker(new_run_dir("s1", data))["command"] == "s1"  # no command given: the name
     # different data: a different hash
-    other = new_run_dir("s1", {**data, "seed": 1})
+    other = new_run_dir("s1", {**data, "seed": 1}, command="simulate")
     assert other.parent == first.parent and other.name[:16] == "20240517-130405_"
     assert other.name[16:] != digest[:8] and re.fullmatch(r"[0-9a-f]{8}", other.name[16:])
     assert leftovers(first) == []
+    assert not list(first.parent.glob(".latest*"))  # no temporary link left
+
+
+def test_default_folder_resumes_unfinished_run_of_same_inputs(tmp_path, monkeypatch):
+    monkeypatch.setattr(rundir, "RESULTS_ROOT", tmp_path / "results")
+    fp = "0123456789abcdef"
+    a, resumed = rundir.prepare_output("sweep", "my study", fp, resume=True)
+    assert not resumed and a.parent == tmp_path / "results" / "sweep" / "my-study"
+    b, resumed = rundir.prepare_output("sweep", "my study", fp, resume=True)
+    assert resumed and b == a  # unfinished, same inputs: the same folder
+    c, resumed = rundir.prepare_output("sweep", "my study", "f" * 16, resume=True)
+    assert not resumed and c != a  # other inputs: a new folder
+    rundir.finish_output(a)
+    d, resumed = rundir.prepare_output("sweep", "my study", fp, resume=True)
+    assert not resumed and d not in (a, c)  # finished: never resumed nor rewritten
+    e, resumed = rundir.prepare_output("sweep", "my study", fp)  # no resume asked
+    assert not resumed and e not in (a, c, d)
+    assert (a.parent / rundir.LATEST).resolve() == e.resolve()
+    # a real folder named latest is never replaced
+    f, _ = rundir.prepare_output("simulate", "x", fp)
+    (f.parent / rundir.LATEST).unlink()
+    (f.parent / rundir.LATEST).mkdir()
+    rundir.prepare_output("simulate", "x", "e" * 16)
+    assert (f.parent / rundir.LATEST).is_dir() and not (f.parent / rundir.LATEST).is_symlink()
 
 
 def test_new_run_dir_given_out(tmp_path):

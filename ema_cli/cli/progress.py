@@ -1,0 +1,127 @@
+"""The command line's progress display (stderr): what stage a command is in, k of n.
+
+On a terminal, one line redrawn in place (at most 10 times a second): the command, the stage,
+``k/n`` and the elapsed time; it is erased when the command ends. In a pipe or a CI log, one
+line per stage as it starts (``identify: GA generation (200) ...``), nothing more.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any, TextIO
+
+REFRESH_S = 0.1  # shortest interval between two redraws of the terminal line [s]
+GRACE_S = 1.0  # a pipe hears of no stage before the command has run this long [s]: a command
+# that ends at once (a bad option, a quick table) prints its result or error alone
+
+
+class StageReporter:
+    """A :data:`ema_cli.progress.Reporter` for one command (see the module docstring)."""
+
+    def __init__(self, command: str, stream: TextIO | None = None,
+                 tty: bool | None = None) -> None:
+        self.command = command
+        self.stream = stream or sys.stderr
+        self.tty = self.stream.isatty() if tty is None else tty
+        self.t0 = time.perf_counter()
+        self.last_stage: str | None = None
+        self.seen: set[str] = set()  # stages already announced (pipe)
+        self.pending: tuple[str, int | None] | None = None  # reported within GRACE_S (pipe)
+        self.last_draw = 0.0
+        self.drawn = 0  # characters of the line on screen (terminal)
+
+    def __call__(self, stage: str, done: int | None, total: int | None, bar: bool) -> None:
+        new = stage != self.last_stage
+        self.last_stage = stage
+        if not self.tty:
+            if stage in self.seen:
+                return
+            if time.perf_counter() - self.t0 < GRACE_S:  # said later, if it lasts
+                self.pending = (stage, total)
+                return
+            if self.pending is not None and self.pending[0] != stage:
+                self._line(*self.pending)
+            self.pending = None
+            self._line(stage, total)
+            return
+        if bar:  # the caller draws its own bar
+            self.clear()
+            return
+        now = time.perf_counter()
+        if not new and now - self.last_draw < REFRESH_S and done != total:
+            return
+        self.last_draw = now
+        count = f" {done:,}/{total:,}" if done is not None and total else (
+            f" {done:,}" if done is not None else "")
+        text = f"{self.command}: {stage}{count} · {now - self.t0:.1f} s"
+        width = _width(self.stream)
+        text = text[: max(width - 1, 10)]
+        self.stream.write("\r" + text + " " * max(self.drawn - len(text), 0))
+        self.stream.flush()
+        self.drawn = len(text)
+
+    def _line(self, stage: str, total: int | None) -> None:
+        self.seen.add(stage)
+        count = f" ({total:,})" if total else ""
+        self.stream.write(f"{self.command}: {stage}{count} ...\n")
+        self.stream.flush()
+
+    def clear(self) -> None:
+        """Erase the terminal line (before the command prints its results)."""
+        if self.tty and self.drawn:
+            self.stream.write("\r" + " " * self.drawn + "\r")
+            self.stream.flush()
+            self.drawn = 0
+
+
+def _width(stream: TextIO) -> int:
+    import os
+    import shutil
+
+    cols = os.environ.get("COLUMNS", "")
+    if cols.isdigit() and int(cols) > 0:
+        return int(cols)
+    try:
+        return os.get_terminal_size(stream.fileno()).columns
+    except (OSError, ValueError, AttributeError):
+        return shutil.get_terminal_size().columns
+
+
+class _ClearFirst:
+    """A rich render hook: erase the progress line before the console prints anything."""
+
+    def __init__(self, reporter: StageReporter) -> None:
+        self.reporter = reporter
+
+    def process_renderables(self, renderables: list) -> list:  # type: ignore[type-arg]
+        self.reporter.clear()
+        return renderables
+
+
+def stages(command: str, console: Any, err_console: Any):  # type: ignore[no-untyped-def]
+    """A context manager for one command: installs a :class:`StageReporter` as the progress
+    reporter (announcements go to ``err_console``) and erases its line whenever the command's
+    consoles print, and at the end."""
+    import contextlib
+
+    from rich.console import RenderHook
+
+    from ema_cli.progress import reporting
+
+    @contextlib.contextmanager
+    def run():  # type: ignore[no-untyped-def]
+        reporter = StageReporter(command)
+        hook = type("ClearHook", (_ClearFirst, RenderHook), {})(reporter)
+        for c in (console, err_console):
+            c.push_render_hook(hook)
+        try:
+            with reporting(reporter, lambda text: err_console.print(text, highlight=False,
+                                                                    markup=False)):
+                yield reporter
+        finally:
+            reporter.clear()
+            for c in (console, err_console):
+                c.pop_render_hook()
+
+    return run()
