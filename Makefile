@@ -18,7 +18,8 @@ PIPI    := $(BIN)/python -m pip install -q --require-hashes --no-deps
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test bench lint reproduce reproduce-ci acceptance acceptance-ci clean lock upgrade
+.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci clean \
+        lock upgrade compile
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-14s %s\n", $$1, $$2}'
@@ -38,16 +39,26 @@ $(TSTAMP): $(LOCKS)/test.lock $(STAMP)
 	$(PIPI) -r $(LOCKS)/test.lock
 	@touch $@
 
-run: $(STAMP)  ## run the main job: the bundled default (20 deg step, all defaults)
+run: $(STAMP)  ## install, compile every kernel (first run only), run the bundled default (20 deg step)
 	$(BIN)/python -m ema_cli.devtools.check_imports
+	$(EMA) compile
 	$(EMA) simulate
 
-test: $(TSTAMP)  ## lint, undeclared imports (deptry), then the whole test suite
-	$(BIN)/ruff check ema_cli tests
-	$(BIN)/deptry ema_cli
-	$(BIN)/python -m pytest
+compile: $(STAMP)  ## compile every kernel entry point and variant into the cache (2 processes)
+	$(EMA) compile
 
-bench: $(STAMP)  ## benchmarks: kernel throughput, batch scaling, 1000-job sweep, start-up, sensitivity, tuning
+test: $(TSTAMP)  ## lint, undeclared imports (deptry), the fast tier of the tests (2 workers)
+	$(BIN)/ruff check ema_cli tests experiments
+	$(BIN)/deptry ema_cli
+	$(EMA) compile
+	$(BIN)/python -m pytest -n auto -m "not slow"
+
+test-all: test  ## make test, then the slow tier (cold compiles, long end-to-end checks)
+	$(BIN)/python -m pytest -n auto -m slow
+
+bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning
+	$(BIN)/python experiments/bench_compile.py
+	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py

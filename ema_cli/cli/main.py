@@ -12,6 +12,7 @@ import typer
 from ema_cli import __version__
 from ema_cli.cli import (
     acceptance,
+    compiling,
     freqresp,
     identify,
     locations,
@@ -63,6 +64,7 @@ COMMANDS = (
     ("reproduce", reproduce.reproduce_cmd),
     ("locations", locations.locations_cmd),
     ("params", locations.params_cmd),
+    ("compile", compiling.compile_cmd),
 )
 """(name, function) of every command, in the order ``ema --help`` lists them."""
 

@@ -139,7 +139,7 @@ def _simulate(config: Path | None, step: float | None, duration: float | None,
     from ema_cli.api.simulation import simulate
     from ema_cli.progress import report
 
-    report("simulating (a first run after an update compiles the kernel, ~1 min)")
+    report("simulating")
     run = simulate(config, overrides, nl=dict(nl_items), step_deg=step, duration_s=duration,
                    dt_s=dt)
     run.timings["imports"] = t_imports

@@ -11,10 +11,12 @@ accumulators are held as ``[quantity, lane]`` arrays (structure of arrays, the l
 innermost) and every time step is one loop over the lanes whose body is branch-free (selects,
 ``min``/``max``, the ``model.vmath`` functions), so the compiler vectorises it (AVX-512: 8 lanes
 per instruction). Chunks are spread over the cores with ``prange``. The time loop of a chunk
-is compiled once per kernel variant (:func:`_variant`: with or without friction, with the
+is compiled once per kernel variant (:func:`variant_codes`: with or without friction, with the
 default Stribeck exponent 1 or any other, with or without the digital controller, quantisers,
 locked motor and compensators), each a function of its own that carries only what its lanes
-need; the rows of a batch are sorted by variant (:func:`variant_order`) so chunks rarely mix.
+need. The variant is a compile-time argument of the entry points, so a variant is compiled
+(or loaded from the cache) only when a batch first needs it; the runner sorts a batch's rows by
+variant (:func:`variant_order`) and calls each variant's entry point for its rows.
 One configuration is a chunk of one lane: the same code, so a batch equals its single runs bit
 for bit, and the serial and the parallel entry points give identical results (no fast-math, no
 reassociation).
@@ -296,7 +298,7 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     x = (theta_m, w_m, i, theta_L, w_L, z, xI); acc = the 22 metric accumulators (row order of
     ``_A_*``); ctl = (sample countdown, held voltage, alive, step where it diverged); inp =
     (reference at t, t+dt/2, t+dt, its velocity at t, load profile at t, t+dt/2, t+dt); lp =
-    :func:`_lane_params`. ``fric`` (:func:`_variant`) 0 skips the LuGre update (no lane has
+    :func:`_lane_params`. ``fric`` (:func:`variant_codes`) 0 skips the LuGre update (no lane has
     friction), 1 takes the Stribeck exponent as 1; ``extras`` False skips the digital
     controller, the quantisers, the locked motor and the compensators (none is in use); both are
     constants at each call site, so a variant carries only what it needs.
@@ -447,28 +449,11 @@ def _advance(W, k, dt, n_steps, in_ss, in_osc, record, fric_chunk, extras):
 def _lane_needs(W, j):
     """What lane ``j`` of ``W`` (rows: model.params order first) needs of the kernel: (friction,
     Stribeck exponent 1, extras: the digital controller, a quantiser, the locked motor or a
-    compensator). The one definition :func:`_variant` and :func:`variant_order` share."""
+    compensator). The one definition :func:`variant_codes` and :func:`variant_order` use."""
     extras = (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
               or W[_LOCKED, j] != 0.0 or W[_DZI, j] > 0.0 or W[_FFC, j] > 0.0
               or W[_FFS2, j] > 0.0 or W[_NHZ, j] > 0.0 or W[_FFSIG0, j] > 0.0)
     return W[_FRIC, j] != 0.0, W[_DELTA, j] == 1.0, extras
-
-
-@njit(cache=True, forceinline=True, error_model="numpy")
-def _variant(W):
-    """The kernel variant the lanes of ``W`` need: (friction mode, extras). The friction mode is
-    0 when no lane has friction, 1 when some lane has and every lane's Stribeck exponent is 1
-    (the model's default: ``|w/vs|**delta`` is then ``|w/vs|``, no log and exp), else 2;
-    extras is True when some lane needs it (:func:`_lane_needs`)."""
-    fric = False
-    unit = True
-    extras = False
-    for j in range(W.shape[1]):
-        f, u, e = _lane_needs(W, j)
-        fric = fric or f
-        unit = unit and u
-        extras = extras or e
-    return (0 if not fric else (1 if unit else 2)), extras
 
 
 @njit(cache=True, error_model="numpy")
@@ -484,15 +469,15 @@ def _variant_codes_nb(PT):
 
 def variant_order(P: np.ndarray) -> np.ndarray:
     """The rows of ``P[n_cases, N_PARAMS]`` sorted (stably) by the kernel variant they need
-    (:func:`_variant`, cheapest first), so that a chunk of lanes rarely mixes variants and
-    pays for the costlier one: the permutation ``order`` (run ``P[order]``)."""
+    (:func:`variant_codes`, cheapest first), so that the rows of one variant are contiguous:
+    the permutation ``order`` (run ``P[order]``)."""
     return np.argsort(_variant_codes_nb(P.T), kind="stable")
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
 def _init(W, n_real, step_info, qidx, dt, n_steps):
     """Fill the derived rows, accumulators and controller memory of every lane of ``W`` (the
-    spare lanes beyond ``n_real`` copy lane 0's parameters) -> :func:`_variant`."""
+    spare lanes beyond ``n_real`` copy lane 0's parameters)."""
     for j in range(W.shape[1]):
         jj = j if j < n_real else 0
         for c in range(N_PARAMS):
@@ -529,14 +514,13 @@ def _init(W, n_real, step_info, qidx, dt, n_steps):
         W[_A_T50, j] = _NAN
         W[_A_T90, j] = _NAN
         W[_A_LAST, j] = -1.0
-    return _variant(W)
 
 
 @njit(cache=True, error_model="numpy")
 def _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig, rows,
            fric, extras):
     """Advance the lanes of ``W`` over steps ``k0..k1-1`` (see :func:`_run`) in the kernel
-    variant (``fric``, ``extras``) of :func:`_variant`: compiled once per variant, each a
+    variant (``fric``, ``extras``) of :func:`variant_codes`: compiled once per variant, each a
     function of its own, so the optimiser sees (and lays out) one variant at a time."""
     literally(fric)
     literally(extras)
@@ -585,34 +569,16 @@ def _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, de
 
 @njit(cache=True, forceinline=True, error_model="numpy")
 def _run(W, n_real, ref_pos, ref_vel, load_half, step_info, qidx, dt, n_steps, k0, k1, dec, sig,
-         rows, met):
-    """Advance the lanes of the work array ``W`` together over steps ``k0..k1-1`` (the first
-    ``n_real`` are real, the rest padding copies of lane 0): initialise ``W`` when ``k0`` is 0,
-    record the signals of lane ``j`` into ``sig[rows[j]]`` and, when the run ends here, write its
-    metrics into ``met[rows[j]]``."""
+         rows, met, fric, extras):
+    """Advance the lanes of the work array ``W`` together over steps ``k0..k1-1`` in the kernel
+    variant (``fric``, ``extras``) the caller chose for them (:func:`variant_codes`; the first
+    ``n_real`` lanes are real, the rest padding copies of lane 0): initialise ``W`` when ``k0``
+    is 0, record the signals of lane ``j`` into ``sig[rows[j]]`` and, when the run ends here,
+    write its metrics into ``met[rows[j]]``."""
     if k0 == 0:
-        fric, extras = _init(W, n_real, step_info, qidx, dt, n_steps)
-    else:
-        fric, extras = _variant(W)
-    if extras:
-        if fric == 0:
-            _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
-                   rows, 0, True)
-        elif fric == 1:
-            _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
-                   rows, 1, True)
-        else:
-            _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
-                   rows, 2, True)
-    elif fric == 0:
-        _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
-               rows, 0, False)
-    elif fric == 1:
-        _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
-               rows, 1, False)
-    else:
-        _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig,
-               rows, 2, False)
+        _init(W, n_real, step_info, qidx, dt, n_steps)
+    _steps(W, n_real, ref_pos, ref_vel, load_half, qidx, dt, n_steps, k0, k1, dec, sig, rows,
+           fric, extras)
     if k1 > n_steps:
         _finish_metrics(W, n_real, dt, n_steps, int(np.ceil(SS_FRACTION * n_steps - 1e-9)), met,
                         rows)
@@ -658,10 +624,11 @@ def _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o
 
 @njit(cache=True, error_model="numpy")
 def simulate_chunk_nb(P, a, b, S, g, ref_pos, ref_vel, load_half, step_info, ref_index, out_row,
-                      dt, n_steps, k0, k1, dec, sig, met):
+                      dt, n_steps, k0, k1, dec, sig, met, fric, extras):
     """Advance rows ``a..b-1`` of ``P[n_cases, N_PARAMS]`` together in one chunk of
     :data:`LANES` lanes (``b - a <= LANES``; the spare lanes repeat row ``a`` and are dropped)
-    over steps ``k0..k1-1``, their work array kept in ``S[g]`` between calls.
+    over steps ``k0..k1-1``, their work array kept in ``S[g]`` between calls, in kernel variant
+    (``fric``, ``extras``) (compile-time constants, :func:`variant_codes`).
 
     ref_pos[n_refs, 2*(k1-k0)+1, or 2*(k1-k0)-1 when k1 == n_steps+1] the reference at the half
     steps t = j*dt/2, j = 2*k0, 2*k0+1, ... (rad); ref_vel[n_refs, k1-k0] its velocity at the
@@ -682,7 +649,7 @@ def simulate_chunk_nb(P, a, b, S, g, ref_pos, ref_vel, load_half, step_info, ref
             for j in range(LANES):
                 W[r, j] = S[g, r, j]
     _run(W, b - a, ref_pos, ref_vel, load_half, step_info, ref_index[a:b], dt, n_steps, k0, k1,
-         dec, sig, out_row[a:b], met)
+         dec, sig, out_row[a:b], met, fric, extras)
     if k1 <= n_steps:
         for r in range(_N_ROWS):
             for j in range(LANES):
@@ -691,36 +658,22 @@ def simulate_chunk_nb(P, a, b, S, g, ref_pos, ref_vel, load_half, step_info, ref
 
 @njit(cache=True, error_model="numpy")
 def simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
-                    n_steps, k0, k1, dec, sig, met):
+                    n_steps, k0, k1, dec, sig, met, fric, extras):
     """The same as :func:`simulate_chunk_nb` for the single row ``a`` (its work array kept in
     ``S[a]``): a chunk of one lane, its states kept in registers (the fastest path for a few
-    configurations; identical results)."""
+    configurations; identical results). One lane: pow_nb's own branch already skips the log
+    and exp for an exponent of 1, so friction mode 2 serves both friction modes here."""
     W = np.empty((_N_ROWS, 1))
     if k0 == 0:
         for r in range(_N_ROWS):
             W[r, 0] = P[a, r - _P0] if _P0 <= r < _P0 + N_PARAMS else 0.0
-        fric, extras = _init(W, 1, step_info, ref_index[a:a + 1], dt, n_steps)
+        _init(W, 1, step_info, ref_index[a:a + 1], dt, n_steps)
     else:
         for r in range(_N_ROWS):
             W[r, 0] = S[a, r, 0]
-        fric, extras = _variant(W)
-    q = ref_index[a]
-    o = out_row[a]
     rows = out_row[a:a + 1]
-    # one lane: pow_nb's own branch already skips the log and exp for an exponent of 1, so the
-    # general friction variant (2) serves both friction modes here
-    if fric > 0 and extras:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 2, True)
-    elif fric > 0:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 2, False)
-    elif extras:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 0, True)
-    else:
-        _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o, met, rows,
-                 0, False)
+    _run_one(W, ref_pos, ref_vel, load_half, ref_index[a], dt, n_steps, k0, k1, dec, sig,
+             out_row[a], met, rows, fric, extras)
     if k1 <= n_steps:
         for r in range(_N_ROWS):
             S[a, r, 0] = W[r, 0]
@@ -775,47 +728,79 @@ def _finish_metrics(W, n_real, dt, n_steps, k_ss, met, rows):
 
 @njit(cache=True, error_model="numpy")
 def simulate_rows_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
-                     n_steps, k0, k1, dec, sig, met):
+                     n_steps, k0, k1, dec, sig, met, fric, extras):
     """Every row of P alone (:func:`simulate_one_nb`, state ``S[n_cases, N_ROWS, 1]``),
     serially; safe in any thread."""
+    literally(fric)
+    literally(extras)
     for a in range(P.shape[0]):
         simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
-                        n_steps, k0, k1, dec, sig, met)
+                        n_steps, k0, k1, dec, sig, met, fric, extras)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def simulate_rows_parallel_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row,
-                              dt, n_steps, k0, k1, dec, sig, met):
+                              dt, n_steps, k0, k1, dec, sig, met, fric, extras):
     """:func:`simulate_rows_nb` with the rows spread over numba threads."""
+    literally(fric)
+    literally(extras)
     for a in prange(P.shape[0]):
         simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
-                        n_steps, k0, k1, dec, sig, met)
+                        n_steps, k0, k1, dec, sig, met, fric, extras)
 
 
 @njit(cache=True, error_model="numpy")
 def simulate_lanes_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt,
-                      n_steps, k0, k1, dec, sig, met):
+                      n_steps, k0, k1, dec, sig, met, fric, extras):
     """Chunks of :data:`LANES` rows of P advanced together (:func:`simulate_chunk_nb`, state
     ``S[n_chunks, N_ROWS, LANES]``), serially; safe in any thread."""
+    literally(fric)
+    literally(extras)
     n = P.shape[0]
     for ch in range((n + LANES - 1) // LANES):
         a = ch * LANES
         simulate_chunk_nb(P, a, min(a + LANES, n), S, ch, ref_pos, ref_vel, load_half,
-                          step_info, ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met)
+                          step_info, ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met,
+                          fric, extras)
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def simulate_lanes_parallel_nb(P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row,
-                               dt, n_steps, k0, k1, dec, sig, met):
+                               dt, n_steps, k0, k1, dec, sig, met, fric, extras):
     """:func:`simulate_lanes_nb` with the chunks spread over numba threads."""
+    literally(fric)
+    literally(extras)
     n = P.shape[0]
     for ch in prange((n + LANES - 1) // LANES):
         a = ch * LANES
         simulate_chunk_nb(P, a, min(a + LANES, n), S, ch, ref_pos, ref_vel, load_half,
-                          step_info, ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met)
+                          step_info, ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met,
+                          fric, extras)
 
 
 KERNELS = {(False, False): simulate_rows_nb, (True, False): simulate_rows_parallel_nb,
            (False, True): simulate_lanes_nb, (True, True): simulate_lanes_parallel_nb}
 """Entry points by (parallel, in lanes); all take (P, S, ref_pos, ref_vel, load_half, step_info,
-ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met), see :func:`simulate_chunk_nb`."""
+ref_index, out_row, dt, n_steps, k0, k1, dec, sig, met, fric, extras), see
+:func:`simulate_chunk_nb`; ``fric`` and ``extras`` are compile-time constants: each variant is
+compiled (or loaded from the cache) the first time it is asked for."""
+
+
+def variant_codes(P: np.ndarray) -> np.ndarray:
+    """Per row of ``P[n_cases, N_PARAMS]`` the kernel variant it needs alone, cheapest first:
+    ``3*extras + fric`` (fric 0 no friction, 1 Stribeck exponent 1, 2 any other)."""
+    return _variant_codes_nb(P.T)
+
+
+def variant_args(code: int, lanes: int) -> tuple[int, bool]:
+    """The (fric, extras) arguments of an entry point for variant ``code`` (:func:`variant_codes`)
+    in lanes (16) or one lane (1): one lane has one friction variant (2) for both modes."""
+    fric, extras = code % 3, code >= 3
+    if lanes == 1 and fric:
+        fric = 2
+    return fric, bool(extras)
+
+
+VARIANTS = {1: ((0, False), (2, False), (0, True), (2, True)),
+            LANES: tuple((f, e) for e in (False, True) for f in (0, 1, 2))}
+"""The variants each lane width compiles: (fric, extras)."""

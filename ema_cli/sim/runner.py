@@ -38,7 +38,14 @@ from ema_cli.sim.grid import (  # noqa: F401 (re-exported: the runner's grid API
     plan_steps,
     resolution_warnings,
 )
-from ema_cli.sim.kernel import ALIVE_ROW, KERNELS, LANES, N_ROWS, variant_order
+from ema_cli.sim.kernel import (
+    ALIVE_ROW,
+    KERNELS,
+    LANES,
+    N_ROWS,
+    variant_args,
+    variant_codes,
+)
 from ema_cli.sim.signals import InputSignal, Reference, Sampler, sampler
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 
@@ -135,8 +142,9 @@ def check_sample_times(P: np.ndarray, dt: float) -> None:
 
 
 @functools.cache
-def kernel_signature() -> tuple:
-    """The numba argument types :func:`simulate_batch` calls every kernel entry point with."""
+def kernel_signature(fric: int = 0, extras: bool = False) -> tuple:
+    """The numba argument types :func:`simulate_batch` calls a kernel entry point with for
+    variant (``fric``, ``extras``) (compile-time constants: literal types)."""
     from numba import types
 
     f2 = types.Array(types.float64, 2, "C")
@@ -144,28 +152,43 @@ def kernel_signature() -> tuple:
     i1 = types.Array(types.int64, 1, "C")
     i8, f8 = types.int64, types.float64
     # P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt, n_steps, k0, k1,
-    # dec, sig, met
-    return (f2, f3, f2, f2, f2, f2, i1, i1, f8, i8, i8, i8, i8, f3, f2)
+    # dec, sig, met, fric, extras
+    return (f2, f3, f2, f2, f2, f2, i1, i1, f8, i8, i8, i8, i8, f3, f2,
+            types.literal(int(fric)), types.literal(bool(extras)))
 
 
-def load_kernel(parallel: bool, lanes: int) -> float:
-    """Load the kernel entry point for (``parallel``, ``lanes``) into this process -> the seconds
-    it took (0 if it was loaded already).
+def load_kernel(parallel: bool, lanes: int, fric: int = 0, extras: bool = False) -> float:
+    """Load the kernel entry point for (``parallel``, ``lanes``) in variant (``fric``,
+    ``extras``) into this process -> the seconds it took (0 if it was loaded already).
 
     The dispatcher is asked to compile :func:`kernel_signature`, the exact argument types
     :func:`simulate_batch` passes: numba takes the machine code from its on-disk cache (or
-    compiles and caches it the first time), without running anything, so later calls with those
-    types do no more than run it.
+    compiles and caches it the first time: announced on stderr, see ``sim.compiled``), without
+    running anything, so later calls with those types do no more than run it.
     """
+    from ema_cli.sim import compiled
+
     disp = KERNELS[(bool(parallel), lanes > 1)]
     if not hasattr(disp, "compile"):  # NUMBA_DISABLE_JIT: plain Python
         return 0.0
-    sig = kernel_signature()
+    sig = kernel_signature(fric, extras)
     if sig in disp.overloads:
         return 0.0
     t0 = time.perf_counter()
-    disp.compile(sig)
+    with compiled.announce(compiled.entry_name(parallel, lanes, fric, extras)):
+        disp.compile(sig)
     return time.perf_counter() - t0
+
+
+def entry_point(parallel: bool, lanes: int, fric: int, extras: bool) -> Callable[..., None]:
+    """The compiled entry point of variant (``fric``, ``extras``) as a plain function (the
+    machine code's own wrapper: calling the dispatcher would retype the literal variant
+    arguments on every call, milliseconds each); loaded first (:func:`load_kernel`)."""
+    disp = KERNELS[(bool(parallel), lanes > 1)]
+    if not hasattr(disp, "compile"):  # NUMBA_DISABLE_JIT: plain Python
+        return disp
+    load_kernel(parallel, lanes, fric, extras)
+    return disp.overloads[kernel_signature(fric, extras)].entry_point
 
 
 def _gib(n: float) -> str:
@@ -249,36 +272,52 @@ def simulate_batch(
         raise ValueError(f"lanes must be 1 or {LANES}, got {lanes}")
     chunk = max(int(TIME_CHUNK), 1)
     n_calls = -(-(n_steps + 1) // chunk)
-    groups = n_cases if lanes == 1 else -(-n_cases // LANES)
-    state_shape = (groups if n_calls > 1 else 0, N_ROWS, lanes)
     n_out = n_steps // dec + 1 if dec > 0 else 0
-    check_memory(n_cases, n_out, math.prod(state_shape))
+    # the rows sorted by the kernel variant they need (friction and its exponent; digital
+    # controller, quantisers, locked motor, compensators): each variant's rows are run by that
+    # variant's entry point (compiled the first time it is needed), in chunks of their own;
+    # each row writes its results straight into its own row of sig and met (out_row)
+    codes = variant_codes(P)
+    args = np.array([variant_args(int(c), lanes) for c in codes], dtype=np.int64)
+    key = args[:, 0] + 3 * args[:, 1]
+    order = np.argsort(key, kind="stable")
+    parts = []  # (variant args, first row, end row, state array) in sorted order
+    for v in np.unique(key):
+        rows_v = np.flatnonzero(key[order] == v)
+        a, b = int(rows_v[0]), int(rows_v[-1]) + 1
+        groups = (b - a) if lanes == 1 else -(-(b - a) // LANES)
+        shape = (groups if n_calls > 1 else 0, N_ROWS, lanes)
+        parts.append(((int(v % 3), bool(v // 3)), a, b, shape))
+    check_memory(n_cases, n_out, sum(math.prod(p[3]) for p in parts))
     sig = np.full((n_cases, n_out, N_SIGNALS), np.nan)
     met = np.empty((n_cases, N_METRICS))
-    state = np.empty(state_shape)
-    # group the rows that need the same kernel variant (friction and its exponent; digital
-    # controller, quantisers, locked motor, compensators) so that a chunk rarely mixes them;
-    # each row writes its results straight into its own row of sig and met (out_row)
-    order = variant_order(P)
     identity = bool(np.all(order == np.arange(n_cases)))
     Pk = P if identity else np.ascontiguousarray(P[order])
     qk = ref_index if identity else np.ascontiguousarray(ref_index[order])
     out_row = np.ascontiguousarray(order, dtype=np.int64)
-    # lanes of the state that hold a real row (the rest repeat the first row of their chunk)
-    real = (np.arange(groups)[:, None] * lanes + np.arange(lanes)[None, :]) < n_cases
-
-    kernel = KERNELS[(bool(parallel), lanes > 1)]
-    load_s = load_kernel(parallel, lanes)
+    calls = []
+    load_s = 0.0
+    for (fric, extras), a, b, shape in parts:
+        load_s += load_kernel(parallel, lanes, fric, extras)
+        kernel = entry_point(parallel, lanes, fric, extras)
+        state = np.empty(shape)
+        # lanes of the state that hold a real row (the rest repeat the first row of a chunk)
+        real = (np.arange(shape[0])[:, None] * lanes + np.arange(lanes)[None, :]) < (b - a)
+        calls.append((kernel, fric, extras, np.ascontiguousarray(Pk[a:b]), state,
+                      np.ascontiguousarray(qk[a:b]), np.ascontiguousarray(out_row[a:b]), real))
     kernel_s = 0.0
     k0 = 0
     while k0 <= n_steps:
         k1 = min(k0 + chunk, n_steps + 1)
-        if n_calls > 1 and k0 > 0 and not np.any(state[:, ALIVE_ROW, :][real] != 0.0):
+        if n_calls > 1 and k0 > 0 and not any(np.any(c[4][:, ALIVE_ROW, :][c[7]] != 0.0)
+                                              for c in calls):
             k0 = n_steps + 1  # every row has diverged: only the metrics are left to finish
             k1 = k0
         pos, vel, load = _inputs(sources, k0, k1, with_load)
         t0 = time.perf_counter()
-        kernel(Pk, state, pos, vel, load, info, qk, out_row, dt, n_steps, k0, k1, dec, sig, met)
+        for kernel, fric, extras, Pv, state, qv, ov, _ in calls:
+            kernel(Pv, state, pos, vel, load, info, qv, ov, dt, n_steps, k0, k1, dec, sig, met,
+                   fric, extras)
         kernel_s += time.perf_counter() - t0
         if progress is not None:
             progress(min(k1, n_steps + 1) / (n_steps + 1))

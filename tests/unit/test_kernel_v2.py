@@ -432,3 +432,29 @@ def test_load_profile_is_interpolated_linearly_and_held_at_the_ends():
     np.testing.assert_allclose(rec2, 0.5 + prof - 20.0 * res.signals[1, :, TH_L], rtol=0,
                                atol=1e-12)
 
+
+
+def test_variant_arguments_of_each_lane_width():
+    # one lane has one friction variant (pow's own branch serves exponent 1); lanes have three
+    assert kernel.variant_args(0, 1) == (0, False)
+    assert kernel.variant_args(1, 1) == (2, False)
+    assert kernel.variant_args(4, 1) == (2, True)
+    assert kernel.variant_args(1, kernel.LANES) == (1, False)
+    assert kernel.variant_args(5, kernel.LANES) == (2, True)
+    assert set(kernel.VARIANTS[1]) == {kernel.variant_args(c, 1) for c in range(6)}
+    assert set(kernel.VARIANTS[kernel.LANES]) == {kernel.variant_args(c, kernel.LANES)
+                                                  for c in range(6)}
+
+
+def test_a_batch_of_mixed_variants_equals_its_single_runs():
+    # rows of four variants in one batch: each variant's rows run by that variant's entry point,
+    # every row bit-identical to the row run alone
+    rows = [{"friction": 1, "delta": 2.0, "sigma2": 0.01}, {}, {"Ts": 1e-4}, {"friction": 1},
+            {"dzi_v": 0.5, "friction": 1}, {"alpha": 1e-4}] * 3
+    P = np.array([to_row(resolve(o)) for o in rows])
+    sig = InputSignal("step", 0.1 * DEG)
+    batch = simulate_batch(P, [sig], None, 1e-5, 3000, 10, lanes=kernel.LANES)
+    for i in range(6):
+        one = simulate_batch(P[i:i + 1], [sig], None, 1e-5, 3000, 10, lanes=1)
+        np.testing.assert_array_equal(batch.signals[i], one.signals[0])
+        np.testing.assert_array_equal(batch.metrics[i], one.metrics[0])

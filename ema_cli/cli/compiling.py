@@ -1,0 +1,45 @@
+"""`ema compile`: compile (or load from the cache) every kernel entry point in every variant,
+so that no later command waits for the compiler (``make run`` runs it)."""
+
+from __future__ import annotations
+
+import typer
+
+from ema_cli.cli.common import handle_errors
+
+
+@handle_errors
+def compile_cmd(
+    jobs: int = typer.Option(2, "--jobs", "-j", min=1, max=64, metavar="N",
+                             help="processes compiling at once (the unit families: one lane, "
+                                  "SIMD lanes, identification; at most 3 are used)"),
+) -> None:
+    """Compile every kernel entry point and variant into the cache (first run after an
+    install or an edit of the model or the kernel; then a second or two)."""
+    import time
+
+    from ema_cli.cli.common import err_console
+    from ema_cli.sim import compiled
+
+    t0 = time.perf_counter()
+    names = compiled.units()
+    todo = [n for n in names if not compiled.is_cached(n)]
+    if todo:
+        est = sum(compiled.estimate_s(n) for n in todo) / max(1, min(jobs, 3))
+        err_console.print(f"compiling the simulator: {len(todo)} of {len(names)} units "
+                          f"(first run after an install or an edit), ~{est:.0f} s on "
+                          f"{min(jobs, 3)} process{'es' if min(jobs, 3) > 1 else ''}")
+
+    def done(name: str, sec: float, k: int, n: int) -> None:
+        err_console.print(f"  [{k}/{n}] {compiled.describe(name)}: {sec:.1f} s")
+
+    compiled.compile_all(jobs, done)
+    # load them all here too: a unit a worker compiled must now come from the cache
+    missing = [n for n in names if not compiled.is_cached(n)]
+    if missing:
+        from ema_cli.errors import EmaError
+
+        raise EmaError(f"the compiled cache lacks {', '.join(missing)} after compiling; is "
+                       "the cache folder writable? (EMA_CACHE_DIR)")
+    typer.echo(f"kernels: all {len(names)} units compiled and cached "
+               f"({time.perf_counter() - t0:.1f} s)")

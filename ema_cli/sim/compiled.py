@@ -1,0 +1,219 @@
+"""Compiling the simulator: what is compiled, whether it is cached, telling the user, and
+compiling everything at once (``ema compile``, run by ``make run``).
+
+The kernel's entry points (``sim.kernel.KERNELS``: one lane or SIMD lanes, serial or
+parallel) are compiled per variant (``kernel.VARIANTS``), each the first time a batch needs
+it, into numba's on-disk cache under the source key of ``ema_cli._numba`` (an edit of the
+model or the kernel selects a new, empty folder). A marker file per compiled unit in that
+folder says the unit is cached: a unit without one is compiled now, and that is announced on
+stderr ("compiling the simulator ... first run after an install or an edit, ~N s"), with the
+time it took once done.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+from ema_cli import progress
+
+# CPU seconds one unit takes to compile on this kind of machine (2 idle cores, measured by
+# experiments/bench_compile.py): the announcement's estimate
+COMPILE_S = {"rows": 5.0, "rows-parallel": 3.0, "lanes": 6.0, "lanes-parallel": 4.0,
+             "identify": 4.0}
+QUIET_ENV = "EMA_COMPILE_QUIET"  # set: compile without announcing (ema compile's workers)
+FRIC_NAMES = {0: "no friction", 1: "LuGre, Stribeck exponent 1", 2: "LuGre"}
+
+
+def entry_name(parallel: bool, lanes: int, fric: int, extras: bool) -> str:
+    """The unit's name: ``lanes-parallel/fric1/extras0``."""
+    base = ("lanes" if lanes > 1 else "rows") + ("-parallel" if parallel else "")
+    return f"{base}/fric{fric}/extras{int(extras)}"
+
+
+def describe(name: str) -> str:
+    """A reader's words for a unit name."""
+    if "/" not in name:
+        return name
+    base, f, e = name.split("/")
+    width = "16 SIMD lanes" if base.startswith("lanes") else "one lane"
+    par = ", parallel" if base.endswith("parallel") else ""
+    extras = ", with controller extras" if e.endswith("1") else ""
+    return f"{width}{par}, {FRIC_NAMES[int(f[-1])]}{extras}"
+
+
+def _cache_dir() -> Path:
+    from numba import config
+
+    return Path(config.CACHE_DIR)
+
+
+def _marker(name: str) -> Path:
+    return _cache_dir() / f"ema-compiled-{name.replace('/', '-')}.ok"
+
+
+def is_cached(name: str) -> bool:
+    """Whether unit ``name`` was compiled into the current cache folder."""
+    return _marker(name).is_file()
+
+
+def estimate_s(name: str) -> float:
+    """The estimated compile time of a unit [s]."""
+    return COMPILE_S.get(name.split("/")[0], 5.0)
+
+
+def _say(text: str) -> None:
+    if progress._announcer is not None:  # a command runs: its own stderr line
+        progress.announce(text)
+    else:  # the API, a notebook, a test
+        print(text, file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def announce(name: str) -> Iterator[None]:
+    """Around the compilation (or cache load) of unit ``name``: when it is not cached yet, say
+    so before (with an estimate) and after (with the time it took), and mark it cached."""
+    if os.environ.get("NUMBA_DISABLE_JIT") == "1" or is_cached(name):
+        yield
+        return
+    if os.environ.get(QUIET_ENV):  # `ema compile` reports for its workers
+        yield
+        with contextlib.suppress(OSError):
+            _marker(name).write_text("compiled\n")
+        return
+    _say(f"compiling the simulator ({describe(name)}): first run after an install or an "
+         f"edit, ~{estimate_s(name):.0f} s; `ema compile` compiles everything at once")
+    t0 = time.perf_counter()
+    yield
+    with contextlib.suppress(OSError):
+        _marker(name).write_text(f"{time.perf_counter() - t0:.3f}\n")
+    _say(f"compiled in {time.perf_counter() - t0:.1f} s (cached for the next runs)")
+
+
+def units() -> list[str]:
+    """Every compiled unit ``ema compile`` makes: each entry point in each variant, and the
+    identification kernels."""
+    from ema_cli.sim.kernel import LANES, VARIANTS
+
+    out = []
+    for lanes in (1, LANES):
+        for parallel in (False, True):
+            for fric, extras in VARIANTS[lanes]:
+                out.append(entry_name(parallel, lanes, fric, extras))
+    out.append("identify")
+    return out
+
+
+def compile_unit(name: str, quiet: bool = False) -> float:
+    """Compile (or load from the cache) one unit in this process -> seconds (``quiet``: no
+    announcement, the caller reports)."""
+    if quiet:
+        previous = os.environ.get(QUIET_ENV)
+        os.environ[QUIET_ENV] = "1"
+        try:
+            return compile_unit(name)
+        finally:
+            if previous is None:
+                os.environ.pop(QUIET_ENV, None)
+            else:
+                os.environ[QUIET_ENV] = previous
+    t0 = time.perf_counter()
+    if name == "identify":
+        with announce(name):
+            from ema_cli.identify.run import warm_kernels
+
+            warm_kernels()
+        return time.perf_counter() - t0
+    from ema_cli.sim.runner import load_kernel
+
+    base, f, e = name.split("/")
+    load_kernel(base.endswith("parallel"), 16 if base.startswith("lanes") else 1,
+                int(f[-1]), e.endswith("1"))
+    return time.perf_counter() - t0
+
+
+def _family(name: str) -> str:
+    """The units that share compiled callees and one numba index file: one process each."""
+    return name.split("/")[0].split("-")[0]
+
+
+def compile_all(jobs: int = 2, on_done: Callable[[str, float, int, int], None] | None = None
+                ) -> dict[str, float]:
+    """Compile every unit (:func:`units`) not cached yet -> seconds per unit compiled;
+    ``on_done(name, seconds, done, total)`` after each. With ``jobs`` > 1 the families of
+    units (one lane, SIMD lanes: each shares its callees and numba's index files) compile in
+    separate processes into the shared cache, so no two processes write one index file."""
+    todo = [n for n in units() if not is_cached(n)]
+    out: dict[str, float] = {}
+    if not todo:
+        return out
+    families: dict[str, list[str]] = {}
+    for n in todo:
+        families.setdefault(_family(n), []).append(n)
+    jobs = max(1, min(jobs, len(families)))
+    if jobs == 1:
+        for k, n in enumerate(todo, 1):
+            out[n] = compile_unit(n, quiet=True)
+            if on_done:
+                on_done(n, out[n], k, len(todo))
+        return out
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")  # a fresh interpreter each: nothing compiled is inherited
+    queue = ctx.Queue()
+    procs = [ctx.Process(target=_family_worker, args=(names, queue), daemon=True)
+             for names in _deal(list(families.values()), jobs)]
+    previous = os.environ.get(QUIET_ENV)
+    os.environ[QUIET_ENV] = "1"  # inherited by the spawned workers
+    try:
+        for p in procs:
+            p.start()
+    finally:
+        if previous is None:
+            os.environ.pop(QUIET_ENV, None)
+        else:
+            os.environ[QUIET_ENV] = previous
+    done = 0
+    try:
+        while done < len(todo):
+            n, sec = queue.get()
+            if n is None:  # a worker failed: compile what is left here, with its message
+                break
+            done += 1
+            out[n] = sec
+            if on_done:
+                on_done(n, sec, done, len(todo))
+    finally:
+        for p in procs:
+            p.join()
+    for n in todo:
+        if n not in out:
+            out[n] = compile_unit(n, quiet=True)
+            done += 1
+            if on_done:
+                on_done(n, out[n], done, len(todo))
+    return out
+
+
+def _deal(families: list[list[str]], jobs: int) -> list[list[str]]:
+    """Families dealt to ``jobs`` processes, the costliest first to the least loaded."""
+    load = [0.0] * jobs
+    out: list[list[str]] = [[] for _ in range(jobs)]
+    for fam in sorted(families, key=lambda f: -sum(estimate_s(n) for n in f)):
+        i = load.index(min(load))
+        out[i].extend(fam)
+        load[i] += sum(estimate_s(n) for n in fam)
+    return out
+
+
+def _family_worker(names: list[str], queue: object) -> None:
+    try:
+        for n in names:
+            queue.put((n, compile_unit(n)))  # type: ignore[attr-defined]
+    except BaseException:
+        queue.put((None, 0.0))  # type: ignore[attr-defined]
+        raise

@@ -1,0 +1,90 @@
+"""`ema compile` and the compiled-code cache: cold units are compiled once (announced), warm ones
+load at once; a batch compiles only the variant it needs."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _ema(args: list[str], cache: Path) -> subprocess.CompletedProcess:
+    env = {**os.environ, "EMA_CACHE_DIR": str(cache), "COLUMNS": "80"}
+    env.pop("NUMBA_DISABLE_JIT", None)
+    return subprocess.run([sys.executable, "-c", "from ema_cli.cli.main import main; main()",
+                           *args], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=600)
+
+
+def test_a_cold_unit_is_announced_compiled_once_and_then_marked_cached(tmp_path):
+    # one unit (one lane, no friction: what `ema simulate` needs) in a fresh cache: announced
+    # on stderr with its estimate, compiled, marked; a second process loads it silently
+    script = ("from ema_cli.sim import compiled, runner\n"
+              "name = compiled.entry_name(False, 1, 0, False)\n"
+              "print(compiled.is_cached(name))\n"
+              "runner.load_kernel(False, 1, 0, False)\n"
+              "print(compiled.is_cached(name))\n")
+    env = {**os.environ, "EMA_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("NUMBA_DISABLE_JIT", None)
+    env.pop("EMA_COMPILE_QUIET", None)
+    first = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env,
+                           capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr
+    assert first.stdout.split() == ["False", "True"]
+    assert "compiling the simulator (one lane, no friction)" in first.stderr
+    assert "compiled in" in first.stderr
+    second = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env,
+                            capture_output=True, text=True, timeout=600)
+    assert second.stdout.split() == ["True", "True"]
+    assert "compiling" not in second.stderr
+
+
+def test_units_cover_every_entry_point_and_variant():
+    from ema_cli.sim import compiled
+    from ema_cli.sim.kernel import KERNELS, LANES, VARIANTS
+
+    names = compiled.units()
+    assert len(names) == len(set(names))
+    expected = 2 * len(VARIANTS[1]) + 2 * len(VARIANTS[LANES]) + 1  # + identification
+    assert len(names) == expected == 21
+    for (parallel, lanes) in KERNELS:
+        width = LANES if lanes else 1
+        for fric, extras in VARIANTS[width]:
+            assert compiled.entry_name(parallel, width, fric, extras) in names
+    assert compiled.describe("lanes-parallel/fric1/extras1") == (
+        "16 SIMD lanes, parallel, LuGre, Stribeck exponent 1, with controller extras")
+
+
+def test_families_are_dealt_whole_to_processes():
+    # the units of one family share numba's index files: never split over two processes
+    from ema_cli.sim import compiled
+
+    fams: dict[str, list[str]] = {}
+    for n in compiled.units():
+        fams.setdefault(compiled._family(n), []).append(n)
+    assert set(fams) == {"rows", "lanes", "identify"}
+    shares = compiled._deal(list(fams.values()), 2)
+    for fam in fams.values():
+        assert sum(all(n in s for n in fam) for s in shares) == 1
+
+
+@pytest.mark.slow
+def test_ema_compile_from_scratch_then_warm(tmp_path):
+    # every unit from an empty cache in two processes, then a second run loads them all
+    cache = tmp_path / "cache"
+    cold = _ema(["compile"], cache)
+    assert cold.returncode == 0, cold.stderr
+    assert "compiling the simulator: 21 of 21 units" in cold.stderr
+    assert "[21/21]" in cold.stderr
+    assert "kernels: all 21 units compiled and cached" in cold.stdout
+    warm = _ema(["compile"], cache)
+    assert warm.returncode == 0
+    assert warm.stderr == ""
+    assert "kernels: all 21 units compiled and cached" in warm.stdout
+    secs = float(warm.stdout.rsplit("(", 1)[1].split(" s)")[0])
+    assert secs < 2.0
