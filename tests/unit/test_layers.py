@@ -1,7 +1,8 @@
 """The package's imports go one way, down the layers, and never round in a cycle.
 
 Layers, higher first (a module may import its own folder and any lower layer, never a higher
-one): devtools (the Makefile's checks, which import every module) > cli > api (the Python API the commands also run through) > report > analysis, sweep,
+one): devtools (the Makefile's checks, which import every module) > cli > api (the Python
+API the commands also run through) > report > analysis, sweep,
 identify (siblings: they may import each other only if no cycle of folders results) > config >
 sim > model. The top-level modules (``errors``, ``units``,
 ``timing``, ``files``, ``hashing``, ``_numba``, ``__init__``) are below everything: any layer
