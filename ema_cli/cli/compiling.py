@@ -18,11 +18,12 @@ def compile_cmd(
     install or an edit of the model or the kernel; then a second or two)."""
     import time
 
+    from ema_cli.api import kernels
     from ema_cli.cli.common import err_console
     from ema_cli.sim import compiled
 
     t0 = time.perf_counter()
-    names = compiled.units()
+    names = kernels.units()
     todo = [n for n in names if not compiled.is_cached(n)]
     if todo:
         est = sum(compiled.estimate_s(n) for n in todo) / max(1, min(jobs, 3))
@@ -33,9 +34,8 @@ def compile_cmd(
     def done(name: str, sec: float, k: int, n: int) -> None:
         err_console.print(f"  [{k}/{n}] {compiled.describe(name)}: {sec:.1f} s")
 
-    compiled.compile_all(jobs, done)
-    # load them all here too: a unit a worker compiled must now come from the cache
-    missing = [n for n in names if not compiled.is_cached(n)]
+    kernels.compile_all(jobs, done)
+    missing = kernels.missing()
     if missing:
         from ema_cli.errors import EmaError
 

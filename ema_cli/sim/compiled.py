@@ -1,5 +1,5 @@
-"""Compiling the simulator: what is compiled, whether it is cached, telling the user, and
-compiling everything at once (``ema compile``, run by ``make run``).
+"""Compiling the simulator: what is compiled, whether it is cached, and telling the user
+(compiling everything at once, ``ema compile``, is ``api.kernels``).
 
 The kernel's entry points (``sim.kernel.KERNELS``: one lane or SIMD lanes, serial or
 parallel) are compiled per variant (``kernel.VARIANTS``), each the first time a batch needs
@@ -16,7 +16,7 @@ import contextlib
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 from ema_cli import progress
@@ -94,9 +94,8 @@ def announce(name: str) -> Iterator[None]:
     _say(f"compiled in {time.perf_counter() - t0:.1f} s (cached for the next runs)")
 
 
-def units() -> list[str]:
-    """Every compiled unit ``ema compile`` makes: each entry point in each variant, and the
-    identification kernels."""
+def kernel_units() -> list[str]:
+    """Every kernel unit: each entry point in each variant (``kernel.VARIANTS``)."""
     from ema_cli.sim.kernel import LANES, VARIANTS
 
     out = []
@@ -104,116 +103,18 @@ def units() -> list[str]:
         for parallel in (False, True):
             for fric, extras in VARIANTS[lanes]:
                 out.append(entry_name(parallel, lanes, fric, extras))
-    out.append("identify")
     return out
 
 
-def compile_unit(name: str, quiet: bool = False) -> float:
-    """Compile (or load from the cache) one unit in this process -> seconds (``quiet``: no
-    announcement, the caller reports)."""
-    if quiet:
-        previous = os.environ.get(QUIET_ENV)
-        os.environ[QUIET_ENV] = "1"
-        try:
-            return compile_unit(name)
-        finally:
-            if previous is None:
-                os.environ.pop(QUIET_ENV, None)
-            else:
-                os.environ[QUIET_ENV] = previous
-    t0 = time.perf_counter()
-    if name == "identify":
-        with announce(name):
-            from ema_cli.identify.run import warm_kernels
-
-            warm_kernels()
-        return time.perf_counter() - t0
-    from ema_cli.sim.runner import load_kernel
-
-    base, f, e = name.split("/")
-    load_kernel(base.endswith("parallel"), 16 if base.startswith("lanes") else 1,
-                int(f[-1]), e.endswith("1"))
-    return time.perf_counter() - t0
-
-
-def _family(name: str) -> str:
-    """The units that share compiled callees and one numba index file: one process each."""
-    return name.split("/")[0].split("-")[0]
-
-
-def compile_all(jobs: int = 2, on_done: Callable[[str, float, int, int], None] | None = None
-                ) -> dict[str, float]:
-    """Compile every unit (:func:`units`) not cached yet -> seconds per unit compiled;
-    ``on_done(name, seconds, done, total)`` after each. With ``jobs`` > 1 the families of
-    units (one lane, SIMD lanes: each shares its callees and numba's index files) compile in
-    separate processes into the shared cache, so no two processes write one index file."""
-    todo = [n for n in units() if not is_cached(n)]
-    out: dict[str, float] = {}
-    if not todo:
-        return out
-    families: dict[str, list[str]] = {}
-    for n in todo:
-        families.setdefault(_family(n), []).append(n)
-    jobs = max(1, min(jobs, len(families)))
-    if jobs == 1:
-        for k, n in enumerate(todo, 1):
-            out[n] = compile_unit(n, quiet=True)
-            if on_done:
-                on_done(n, out[n], k, len(todo))
-        return out
-    import multiprocessing as mp
-
-    ctx = mp.get_context("spawn")  # a fresh interpreter each: nothing compiled is inherited
-    queue = ctx.Queue()
-    procs = [ctx.Process(target=_family_worker, args=(names, queue), daemon=True)
-             for names in _deal(list(families.values()), jobs)]
+@contextlib.contextmanager
+def quiet() -> Iterator[None]:
+    """Compile without announcing (the caller reports each unit)."""
     previous = os.environ.get(QUIET_ENV)
-    os.environ[QUIET_ENV] = "1"  # inherited by the spawned workers
+    os.environ[QUIET_ENV] = "1"
     try:
-        for p in procs:
-            p.start()
+        yield
     finally:
         if previous is None:
             os.environ.pop(QUIET_ENV, None)
         else:
             os.environ[QUIET_ENV] = previous
-    done = 0
-    try:
-        while done < len(todo):
-            n, sec = queue.get()
-            if n is None:  # a worker failed: compile what is left here, with its message
-                break
-            done += 1
-            out[n] = sec
-            if on_done:
-                on_done(n, sec, done, len(todo))
-    finally:
-        for p in procs:
-            p.join()
-    for n in todo:
-        if n not in out:
-            out[n] = compile_unit(n, quiet=True)
-            done += 1
-            if on_done:
-                on_done(n, out[n], done, len(todo))
-    return out
-
-
-def _deal(families: list[list[str]], jobs: int) -> list[list[str]]:
-    """Families dealt to ``jobs`` processes, the costliest first to the least loaded."""
-    load = [0.0] * jobs
-    out: list[list[str]] = [[] for _ in range(jobs)]
-    for fam in sorted(families, key=lambda f: -sum(estimate_s(n) for n in f)):
-        i = load.index(min(load))
-        out[i].extend(fam)
-        load[i] += sum(estimate_s(n) for n in fam)
-    return out
-
-
-def _family_worker(names: list[str], queue: object) -> None:
-    try:
-        for n in names:
-            queue.put((n, compile_unit(n)))  # type: ignore[attr-defined]
-    except BaseException:
-        queue.put((None, 0.0))  # type: ignore[attr-defined]
-        raise

@@ -45,10 +45,11 @@ def test_a_cold_unit_is_announced_compiled_once_and_then_marked_cached(tmp_path)
 
 
 def test_units_cover_every_entry_point_and_variant():
+    from ema_cli.api import kernels
     from ema_cli.sim import compiled
     from ema_cli.sim.kernel import KERNELS, LANES, VARIANTS
 
-    names = compiled.units()
+    names = kernels.units()
     assert len(names) == len(set(names))
     expected = 2 * len(VARIANTS[1]) + 2 * len(VARIANTS[LANES]) + 1  # + identification
     assert len(names) == expected == 21
@@ -62,13 +63,13 @@ def test_units_cover_every_entry_point_and_variant():
 
 def test_families_are_dealt_whole_to_processes():
     # the units of one family share numba's index files: never split over two processes
-    from ema_cli.sim import compiled
+    from ema_cli.api import kernels
 
     fams: dict[str, list[str]] = {}
-    for n in compiled.units():
-        fams.setdefault(compiled._family(n), []).append(n)
+    for n in kernels.units():
+        fams.setdefault(kernels.family(n), []).append(n)
     assert set(fams) == {"rows", "lanes", "identify"}
-    shares = compiled._deal(list(fams.values()), 2)
+    shares = kernels.deal(list(fams.values()), 2)
     for fam in fams.values():
         assert sum(all(n in s for n in fam) for s in shares) == 1
 

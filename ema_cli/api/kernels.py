@@ -1,0 +1,121 @@
+"""Compiling every kernel at once (``ema compile``, run by ``make run`` and ``make test``).
+
+The units are ``sim.compiled.kernel_units`` (each kernel entry point in each variant) and the
+identification kernels. Units not cached yet are compiled in up to ``jobs`` processes, one per
+family of units that share compiled callees and numba's index files (one lane, SIMD lanes,
+identification), so no two processes write one index file.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from ema_cli.sim import compiled
+
+IDENTIFY = "identify"  # the unit of the identification kernels (Eq. 8 cost and profile)
+
+
+def units() -> list[str]:
+    """Every unit ``ema compile`` makes."""
+    return [*compiled.kernel_units(), IDENTIFY]
+
+
+def compile_unit(name: str, quiet: bool = False) -> float:
+    """Compile (or load from the cache) one unit in this process -> seconds (``quiet``: no
+    announcement, the caller reports)."""
+    if quiet:
+        with compiled.quiet():
+            return compile_unit(name)
+    t0 = time.perf_counter()
+    if name == IDENTIFY:
+        from ema_cli.identify.run import warm_kernels
+
+        with compiled.announce(name):
+            warm_kernels()
+        return time.perf_counter() - t0
+    from ema_cli.sim.runner import load_kernel
+
+    base, f, e = name.split("/")
+    load_kernel(base.endswith("parallel"), 16 if base.startswith("lanes") else 1,
+                int(f[-1]), e.endswith("1"))
+    return time.perf_counter() - t0
+
+
+def family(name: str) -> str:
+    """The units that share compiled callees and one numba index file: one process each."""
+    return name.split("/")[0].split("-")[0]
+
+
+def deal(families: list[list[str]], jobs: int) -> list[list[str]]:
+    """Families dealt to ``jobs`` processes, the costliest first to the least loaded."""
+    load = [0.0] * jobs
+    out: list[list[str]] = [[] for _ in range(jobs)]
+    for fam in sorted(families, key=lambda f: -sum(compiled.estimate_s(n) for n in f)):
+        i = load.index(min(load))
+        out[i].extend(fam)
+        load[i] += sum(compiled.estimate_s(n) for n in fam)
+    return out
+
+
+def _family_worker(names: list[str], queue: object) -> None:
+    try:
+        for n in names:
+            queue.put((n, compile_unit(n)))  # type: ignore[attr-defined]
+    except BaseException:
+        queue.put((None, 0.0))  # type: ignore[attr-defined]
+        raise
+
+
+def compile_all(jobs: int = 2, on_done: Callable[[str, float, int, int], None] | None = None
+                ) -> dict[str, float]:
+    """Compile every unit (:func:`units`) not cached yet -> seconds per unit compiled;
+    ``on_done(name, seconds, done, total)`` after each (a unit a worker could not compile is
+    compiled here, so its error is this process's)."""
+    todo = [n for n in units() if not compiled.is_cached(n)]
+    out: dict[str, float] = {}
+    if not todo:
+        return out
+    families: dict[str, list[str]] = {}
+    for n in todo:
+        families.setdefault(family(n), []).append(n)
+    jobs = max(1, min(jobs, len(families)))
+    done = 0
+    if jobs > 1:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")  # a fresh interpreter each: nothing compiled is inherited
+        queue = ctx.Queue()
+        procs = [ctx.Process(target=_family_worker, args=(names, queue), daemon=True)
+                 for names in deal(list(families.values()), jobs)]
+        with compiled.quiet():  # the workers inherit it: this process reports
+            for p in procs:
+                p.start()
+        try:
+            while done < len(todo):
+                n, sec = queue.get()
+                if n is None:  # a worker failed: what is left is compiled here
+                    break
+                done += 1
+                out[n] = sec
+                if on_done:
+                    on_done(n, sec, done, len(todo))
+        finally:
+            for p in procs:
+                p.join()
+    for n in todo:
+        if n not in out:
+            out[n] = compile_unit(n, quiet=True)
+            done += 1
+            if on_done:
+                on_done(n, out[n], done, len(todo))
+    return out
+
+
+def missing() -> list[str]:
+    """The units not cached (after :func:`compile_all`: none, unless the cache is not
+    writable)."""
+    return [n for n in units() if not compiled.is_cached(n)]
+
+
+__all__ = ["compile_all", "compile_unit", "missing", "units"]
