@@ -26,10 +26,15 @@ def compile_cmd(
     names = kernels.units()
     todo = [n for n in names if not compiled.is_cached(n)]
     if todo:
-        est = sum(compiled.estimate_s(n) for n in todo) / max(1, min(jobs, 3))
+        fams: dict[str, list[str]] = {}
+        for n in todo:
+            fams.setdefault(kernels.family(n), []).append(n)
+        procs = max(1, min(jobs, len(fams)))
+        est = max(sum(compiled.estimate_s(n) for n in share)
+                  for share in kernels.deal(list(fams.values()), procs))
         err_console.print(f"compiling the simulator: {len(todo)} of {len(names)} units "
                           f"(first run after an install or an edit), ~{est:.0f} s on "
-                          f"{min(jobs, 3)} process{'es' if min(jobs, 3) > 1 else ''}")
+                          f"{procs} process{'es' if procs > 1 else ''}")
 
     def done(name: str, sec: float, k: int, n: int) -> None:
         err_console.print(f"  [{k}/{n}] {compiled.describe(name)}: {sec:.1f} s")

@@ -21,9 +21,10 @@ from pathlib import Path
 
 from ema_cli import progress
 
-# CPU seconds one unit takes to compile on this kind of machine (2 idle cores, measured by
-# experiments/bench_compile.py): the announcement's estimate
-COMPILE_S = {"rows": 5.0, "rows-parallel": 3.0, "lanes": 6.0, "lanes-parallel": 4.0,
+# seconds one unit takes to compile on this kind of machine (2 idle cores, `ema compile` from
+# an empty cache: the 12 lane units 67 s in one process, the 8 one-lane units and the
+# identification kernels ~45 s in the other): the announcements' estimate
+COMPILE_S = {"rows": 6.0, "rows-parallel": 4.0, "lanes": 7.0, "lanes-parallel": 4.5,
              "identify": 4.0}
 QUIET_ENV = "EMA_COMPILE_QUIET"  # set: compile without announcing (ema compile's workers)
 FRIC_NAMES = {0: "no friction", 1: "LuGre, Stribeck exponent 1", 2: "LuGre"}
