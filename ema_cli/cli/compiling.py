@@ -32,9 +32,9 @@ def compile_cmd(
         procs = max(1, min(jobs, len(fams)))
         est = max(sum(compiled.estimate_s(n) for n in share)
                   for share in kernels.deal(list(fams.values()), procs))
-        err_console.print(f"compiling the simulator: {len(todo)} of {len(names)} units "
-                          f"(first run after an install or an edit), ~{est:.0f} s on "
-                          f"{procs} process{'es' if procs > 1 else ''}")
+        err_console.print(f"compiling the simulator: {len(todo)} of {len(names)} units, "
+                          f"~{est:.0f} s on {procs} process{'es' if procs > 1 else ''} "
+                          "(first run only)")
 
     def done(name: str, sec: float, k: int, n: int) -> None:
         err_console.print(f"  [{k}/{n}] {compiled.describe(name)}: {sec:.1f} s")

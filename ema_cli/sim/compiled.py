@@ -27,7 +27,7 @@ from ema_cli import progress
 COMPILE_S = {"rows": 6.0, "rows-parallel": 4.0, "lanes": 7.0, "lanes-parallel": 4.5,
              "identify": 4.0}
 QUIET_ENV = "EMA_COMPILE_QUIET"  # set: compile without announcing (ema compile's workers)
-FRIC_NAMES = {0: "no friction", 1: "LuGre, Stribeck exponent 1", 2: "LuGre"}
+FRIC_NAMES = {0: "no friction", 1: "LuGre (exponent 1)", 2: "LuGre"}
 
 
 def entry_name(parallel: bool, lanes: int, fric: int, extras: bool) -> str:
@@ -41,9 +41,9 @@ def describe(name: str) -> str:
     if "/" not in name:
         return name
     base, f, e = name.split("/")
-    width = "16 SIMD lanes" if base.startswith("lanes") else "one lane"
+    width = "16 lanes" if base.startswith("lanes") else "one lane"
     par = ", parallel" if base.endswith("parallel") else ""
-    extras = ", with controller extras" if e.endswith("1") else ""
+    extras = ", extras" if e.endswith("1") else ""
     return f"{width}{par}, {FRIC_NAMES[int(f[-1])]}{extras}"
 
 
@@ -86,13 +86,13 @@ def announce(name: str) -> Iterator[None]:
         with contextlib.suppress(OSError):
             _marker(name).write_text("compiled\n")
         return
-    _say(f"compiling the simulator ({describe(name)}): first run after an install or an "
-         f"edit, ~{estimate_s(name):.0f} s; `ema compile` compiles everything at once")
+    _say(f"compiling the simulator ({describe(name)}), first run only: "
+         f"~{estimate_s(name):.0f} s")
     t0 = time.perf_counter()
     yield
     with contextlib.suppress(OSError):
         _marker(name).write_text(f"{time.perf_counter() - t0:.3f}\n")
-    _say(f"compiled in {time.perf_counter() - t0:.1f} s (cached for the next runs)")
+    _say(f"compiled in {time.perf_counter() - t0:.1f} s (cached; `ema compile` compiles all)")
 
 
 def kernel_units() -> list[str]:

@@ -36,8 +36,9 @@ def test_a_cold_unit_is_announced_compiled_once_and_then_marked_cached(tmp_path)
                            capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr
     assert first.stdout.split() == ["False", "True"]
-    assert "compiling the simulator (one lane, no friction)" in first.stderr
+    assert "compiling the simulator (one lane, no friction), first run only" in first.stderr
     assert "compiled in" in first.stderr
+    assert max(len(ln) for ln in first.stderr.splitlines()) <= 80
     second = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env,
                             capture_output=True, text=True, timeout=600)
     assert second.stdout.split() == ["True", "True"]
@@ -58,7 +59,7 @@ def test_units_cover_every_entry_point_and_variant():
         for fric, extras in VARIANTS[width]:
             assert compiled.entry_name(parallel, width, fric, extras) in names
     assert compiled.describe("lanes-parallel/fric1/extras1") == (
-        "16 SIMD lanes, parallel, LuGre, Stribeck exponent 1, with controller extras")
+        "16 lanes, parallel, LuGre (exponent 1), extras")
 
 
 def test_families_are_dealt_whole_to_processes():
@@ -82,6 +83,8 @@ def test_ema_compile_from_scratch_then_warm(tmp_path):
     assert cold.returncode == 0, cold.stderr
     assert "compiling the simulator: 21 of 21 units" in cold.stderr
     assert "[21/21]" in cold.stderr
+    for line in (cold.stderr + cold.stdout).splitlines():  # an 80-column terminal
+        assert len(line) <= 80, line
     assert "kernels: all 21 units compiled and cached" in cold.stdout
     warm = _ema(["compile"], cache)
     assert warm.returncode == 0
