@@ -21,6 +21,7 @@ def _ema(args: list[str], cache: Path) -> subprocess.CompletedProcess:
                           timeout=600)
 
 
+@pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_a_cold_unit_is_announced_compiled_once_and_then_marked_cached(tmp_path):
     # one unit (one lane, no friction: what `ema simulate` needs) in a fresh cache: announced
     # on stderr with its estimate, compiled, marked; a second process loads it silently

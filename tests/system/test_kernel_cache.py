@@ -76,6 +76,7 @@ def _peak_current(root: Path, cache: Path) -> tuple[str, float]:
     return key, float(peak)
 
 
+@pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_swapped_parameter_rows_recompile_and_give_the_right_answer(tmp_path):
     # 20 deg step: the motor is current-limited, so the peak current is the limit, 30.35 A
     # (6.07*5, the default sat3); a stale kernel reading L's column as R gave 3.41 A.

@@ -93,6 +93,7 @@ def test_noise_free_log_gives_the_truth(clean):
     assert fit.to_json()["not_determined"] == []
 
 
+@pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_default_fit_of_a_default_log_gives_the_truth():
     """The issue's noise-free figure with nothing set: a 4 s ``--make-data closed-loop`` log
     (contact form, backlash 3 mrad) fitted with the default free set, bounds and budget. The
@@ -124,6 +125,7 @@ def test_continuation_horizons_and_prefix(clean):
     assert problem.prefix(10.0).log.n == problem.log.n
 
 
+@pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_one_percent_noise_within_tolerance_and_covered():
     """Seeds 0..2 (the 10-seed run with the default budget is in the benchmark)."""
     covered = dict.fromkeys(NAMES, 0)

@@ -84,6 +84,7 @@ def test_mismatch_bias_contact_data_paper_model(data):
     assert np.all(np.abs(matched.optimum_errors_pct()) < 1e-9)
 
 
+@pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_summary_for_the_reproduction(tmp_path):
     flat = identification_summary({"runs": 2, "ga": {"generations": 60}}, tmp_path)
     for key in ("kL_error_pct_worst", "alpha_error_pct_worst", "kL_optimum", "corr_kL_alpha",

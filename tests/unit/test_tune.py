@@ -65,6 +65,7 @@ def test_one_gain_lands_on_the_brute_force_optimum(brute_force, method):
     assert res.evaluations <= 240
 
 
+@pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_the_tuned_scenarios_resimulate_to_the_reported_cost(tmp_path):
     # configs/tune.yaml at a small budget; every written scenario config re-simulated with
     # `ema simulate`'s API gives back the cost tuning.md reports
