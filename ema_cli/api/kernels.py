@@ -58,6 +58,18 @@ def deal(families: list[list[str]], jobs: int) -> list[list[str]]:
     return out
 
 
+def plan(jobs: int) -> tuple[list[str], list[list[str]], float]:
+    """What :func:`compile_all` would do with ``jobs`` processes -> (the units not cached, their
+    shares per process, the estimated wall time [s]: the busiest share's)."""
+    todo = [n for n in units() if not compiled.is_cached(n)]
+    families: dict[str, list[str]] = {}
+    for n in todo:
+        families.setdefault(family(n), []).append(n)
+    shares = deal(list(families.values()), max(1, min(jobs, len(families)))) if todo else []
+    est = max((sum(compiled.estimate_s(n) for n in sh) for sh in shares), default=0.0)
+    return todo, shares, est
+
+
 def _family_worker(names: list[str], queue: object) -> None:
     try:
         for n in names:
@@ -72,22 +84,16 @@ def compile_all(jobs: int = 2, on_done: Callable[[str, float, int, int], None] |
     """Compile every unit (:func:`units`) not cached yet -> seconds per unit compiled;
     ``on_done(name, seconds, done, total)`` after each (a unit a worker could not compile is
     compiled here, so its error is this process's)."""
-    todo = [n for n in units() if not compiled.is_cached(n)]
+    todo, shares, _ = plan(jobs)
     out: dict[str, float] = {}
-    if not todo:
-        return out
-    families: dict[str, list[str]] = {}
-    for n in todo:
-        families.setdefault(family(n), []).append(n)
-    jobs = max(1, min(jobs, len(families)))
     done = 0
-    if jobs > 1:
+    if len(shares) > 1:
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")  # a fresh interpreter each: nothing compiled is inherited
         queue = ctx.Queue()
         procs = [ctx.Process(target=_family_worker, args=(names, queue), daemon=True)
-                 for names in deal(list(families.values()), jobs)]
+                 for names in shares]
         with compiled.quiet():  # the workers inherit it: this process reports
             for p in procs:
                 p.start()
@@ -118,4 +124,4 @@ def missing() -> list[str]:
     return [n for n in units() if not compiled.is_cached(n)]
 
 
-__all__ = ["compile_all", "compile_unit", "missing", "units"]
+__all__ = ["compile_all", "compile_unit", "missing", "plan", "units"]

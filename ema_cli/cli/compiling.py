@@ -24,14 +24,9 @@ def compile_cmd(
 
     t0 = time.perf_counter()
     names = kernels.units()
-    todo = [n for n in names if not compiled.is_cached(n)]
+    todo, shares, est = kernels.plan(jobs)
     if todo:
-        fams: dict[str, list[str]] = {}
-        for n in todo:
-            fams.setdefault(kernels.family(n), []).append(n)
-        procs = max(1, min(jobs, len(fams)))
-        est = max(sum(compiled.estimate_s(n) for n in share)
-                  for share in kernels.deal(list(fams.values()), procs))
+        procs = len(shares)
         err_console.print(f"compiling the simulator: {len(todo)} of {len(names)} units, "
                           f"~{est:.0f} s on {procs} process{'es' if procs > 1 else ''} "
                           "(first run only)")

@@ -16,7 +16,8 @@ default Stribeck exponent 1 or any other, with or without the digital controller
 locked motor and compensators), each a function of its own that carries only what its lanes
 need. The variant is a compile-time argument of the entry points, so a variant is compiled
 (or loaded from the cache) only when a batch first needs it; the runner sorts a batch's rows by
-variant (:func:`variant_order`) and calls each variant's entry point for its rows.
+variant (:func:`variant_order`, :func:`variant_keys`) and calls each variant's entry point for
+its rows.
 One configuration is a chunk of one lane: the same code, so a batch equals its single runs bit
 for bit, and the serial and the parallel entry points give identical results (no fast-math, no
 reassociation).
@@ -792,13 +793,21 @@ def variant_codes(P: np.ndarray) -> np.ndarray:
     return _variant_codes_nb(P.T)
 
 
+def variant_keys(codes: np.ndarray, lanes: int) -> np.ndarray:
+    """The entry-point variant ``3*extras + fric`` each code of :func:`variant_codes` runs in
+    lanes (16) or one lane (1): one lane has one friction variant (2) for both modes, so the
+    keys keep the codes' order (rows sorted by code stay grouped by key)."""
+    fric, extras = codes % 3, codes >= 3
+    if lanes == 1:
+        fric = np.where(fric > 0, 2, 0)
+    return fric + 3 * extras
+
+
 def variant_args(code: int, lanes: int) -> tuple[int, bool]:
     """The (fric, extras) arguments of an entry point for variant ``code`` (:func:`variant_codes`)
-    in lanes (16) or one lane (1): one lane has one friction variant (2) for both modes."""
-    fric, extras = code % 3, code >= 3
-    if lanes == 1 and fric:
-        fric = 2
-    return fric, bool(extras)
+    in lanes (16) or one lane (1) (see :func:`variant_keys`)."""
+    key = int(variant_keys(np.array([code]), lanes)[0])
+    return key % 3, key >= 3
 
 
 VARIANTS = {1: ((0, False), (2, False), (0, True), (2, True)),

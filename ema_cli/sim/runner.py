@@ -43,8 +43,9 @@ from ema_cli.sim.kernel import (
     KERNELS,
     LANES,
     N_ROWS,
-    variant_args,
     variant_codes,
+    variant_keys,
+    variant_order,
 )
 from ema_cli.sim.signals import InputSignal, Reference, Sampler, sampler
 from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
@@ -277,13 +278,11 @@ def simulate_batch(
     # controller, quantisers, locked motor, compensators): each variant's rows are run by that
     # variant's entry point (compiled the first time it is needed), in chunks of their own;
     # each row writes its results straight into its own row of sig and met (out_row)
-    codes = variant_codes(P)
-    args = np.array([variant_args(int(c), lanes) for c in codes], dtype=np.int64)
-    key = args[:, 0] + 3 * args[:, 1]
-    order = np.argsort(key, kind="stable")
-    parts = []  # (variant args, first row, end row, state array) in sorted order
+    order = variant_order(P)
+    key = variant_keys(variant_codes(P[order]), lanes)  # sorted: each variant's rows contiguous
+    parts = []  # (variant args, first row, end row, state shape) in sorted order
     for v in np.unique(key):
-        rows_v = np.flatnonzero(key[order] == v)
+        rows_v = np.flatnonzero(key == v)
         a, b = int(rows_v[0]), int(rows_v[-1]) + 1
         groups = (b - a) if lanes == 1 else -(-(b - a) // LANES)
         shape = (groups if n_calls > 1 else 0, N_ROWS, lanes)
@@ -298,7 +297,7 @@ def simulate_batch(
     calls = []
     load_s = 0.0
     for (fric, extras), a, b, shape in parts:
-        load_s += load_kernel(parallel, lanes, fric, extras)
+        load_s += load_kernel(parallel, lanes, fric, extras)  # 0 when loaded already
         kernel = entry_point(parallel, lanes, fric, extras)
         state = np.empty(shape)
         # lanes of the state that hold a real row (the rest repeat the first row of a chunk)
