@@ -164,8 +164,17 @@ def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | 
     for w in fit.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     t = fit.timings
-    console.print(f"GA {t['ga_s']:.1f} s ({fit.ga_throughput / 1e6:.1f} M steps/s), polish "
-                  f"{t['polish_s']:.1f} s, uncertainty and profile "
+    ms = fit.shooting
+    if ms is not None:
+        verdict = ("[green]optimum confirmed[/]" if ms.confirmed
+                   else "[red]optimum NOT confirmed[/] (see the warning)")
+        console.print(f"{verdict}: {ms.search.agree} of {len(ms.search.final_cost)} finishing "
+                      f"starts agree; estimate from the {ms.source}")
+        first = (f"multiple shooting {t['search_s'] - t['polish_s']:.1f} s "
+                 f"({fit.ga_throughput / 1e6:.1f} M steps/s)")
+    else:
+        first = f"GA {t['ga_s']:.1f} s ({fit.ga_throughput / 1e6:.1f} M steps/s)"
+    console.print(f"{first}, polish {t['polish_s']:.1f} s, uncertainty and profile "
                   f"{t['uncertainty_profile_s']:.1f} s; total {t['total_s']:.1f} s -> {folder}")
 
 

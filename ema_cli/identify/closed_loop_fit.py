@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,10 +41,18 @@ from ema_cli.identify.closed_loop import (
     load_log,
 )
 from ema_cli.identify.log_settings import ClosedLoopSettings
-from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
+from ema_cli.identify.uncertainty import (
+    Uncertainty,
+    assess,
+    covariance,
+    covariance_clustered,
+)
 from ema_cli.model.params import BY_NAME
 from ema_cli.optim.ga import GAHistory, preset, run_ga
 from ema_cli.progress import report
+
+if TYPE_CHECKING:
+    from ema_cli.identify.shooting_fit import ShootingOutcome
 
 FD_REL_STEP = 1e-4  # central-difference step, relative to max(|x|, 1e-3*(hi - lo)) [-]
 POLISH_TOL = 1e-10  # xtol/ftol/gtol of the least-squares polish [-]
@@ -96,6 +104,7 @@ class ClosedLoopFit:
     ga_throughput: float = 0.0  # kernel steps per second inside the GA [steps/s]
     warnings: list[str] = field(default_factory=list)
     quadratic_ratio: np.ndarray | None = None  # see quadratic_check
+    shooting: ShootingOutcome | None = None  # the multiple-shooting stage (search: shooting)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -137,11 +146,19 @@ class ClosedLoopFit:
         units = {n: BY_NAME[n].unit for n in self.names}
         truth = p.log.truth
         full = self.params
+        ms = self.shooting
         out: dict[str, Any] = {
             "mode": "closed-loop",
-            "method": "output error: GA (optim.ga improved, one batched kernel call per "
-                      "generation) at ga_dt, then scipy least_squares (TRF, bounds) at dt "
-                      "with a batched central-difference Jacobian",
+            "method": ("output error: GA (optim.ga improved, one batched kernel call per "
+                       "generation) at ga_dt, then scipy least_squares (TRF, bounds) at dt "
+                       "with a batched central-difference Jacobian") if ms is None else (
+                "output error by multiple shooting (segments with estimated initial states, "
+                "Sobol starts, batched joint Levenberg-Marquardt with successive halving) at "
+                "ga_dt, then a whole-log least-squares polish at dt, kept only when it reaches "
+                "the noise level inside the multiple-shooting intervals"),
+            "optimum": None if ms is None else {
+                "confirmed": ms.confirmed, "estimate_from": ms.source,
+                "not_confirmed_because": ms.reasons},
             "data": {"source": p.log.source, "n_samples": p.log.n,
                      "duration_s": p.log.duration, "t0_s": p.log.t0,
                      "channels": list(p.channels)},
@@ -157,7 +174,10 @@ class ClosedLoopFit:
             "correlation": {"names": list(self.names), "matrix": u.corr.tolist()},
             "covariance_si": u.cov.tolist(),
             "intervals": f"95 % (Student's t, {u.dof} dof: t = {u.t_quantile:.4f}); covariance "
-                         "A^-1 B A^-1 from the Jacobian, one noise level per channel",
+                         + ("A^-1 B A^-1 from the Jacobian, one noise level per channel"
+                            if ms is None else "A^-1 B A^-1, cluster-robust: the log's segments "
+                            "as clusters" + (", segment states profiled out"
+                                             if ms.source == "multiple shooting" else "")),
             "condition_number": u.cond,
             "quadratic_check": None if self.quadratic_ratio is None else {
                 n: (float(v) if np.isfinite(v) else None)
@@ -167,11 +187,12 @@ class ClosedLoopFit:
             "fit_rms": self.fit_rms(),
             "fit_quality": self.fit_quality(),
             "all_parameters": full,
-            "ga": {"pop": self.settings.ga.pop, "generations": self.settings.ga.generations,
-                   "evaluations": None if self.history is None
-                   else int(self.history.evaluations[-1]),
-                   "x": {n: float(self.x_ga[j]) for j, n in enumerate(self.names)},
-                   "kernel_steps_per_s": self.ga_throughput},
+            "ga": None if ms is not None else {
+                "pop": self.settings.ga.pop, "generations": self.settings.ga.generations,
+                "evaluations": None if self.history is None
+                else int(self.history.evaluations[-1]),
+                "x": {n: float(self.x_ga[j]) for j, n in enumerate(self.names)},
+                "kernel_steps_per_s": self.ga_throughput},
             "polish": {"function_evaluations": self.polish_nfev,
                        "jacobian_evaluations": self.polish_njev, "status": self.polish_status,
                        "restarted_from_profile": self.restarted},
@@ -180,6 +201,8 @@ class ClosedLoopFit:
             "timings_s": self.timings,
             "warnings": self.warnings,
         }
+        if ms is not None:
+            out["shooting"] = ms.to_json()
         if truth is not None:
             out["truth"] = {n: truth[n] for n in self.names if n in truth}
             out["error_pct_vs_truth"] = {
@@ -304,38 +327,64 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
     timings["load_s"] = time.perf_counter() - t0
     problem.kernel_steps, problem.kernel_s, problem.evaluations = 0, 0.0, 0
 
-    t0 = time.perf_counter()
-    spans = horizons(log.duration, settings.ga_horizon_s if settings.polish else None)
-    ga_problem = problem.prefix(spans[0])
-    opts = preset("improved", pop=settings.ga.pop, generations=settings.ga.generations,
-                  patience=settings.ga.patience)
-    ga = run_ga(ga_problem, opts, np.random.default_rng(np.random.SeedSequence(settings.seed)))
-    timings["ga_s"] = time.perf_counter() - t0
-    throughput = (ga_problem.kernel_steps / ga_problem.kernel_s if ga_problem.kernel_s > 0
-                  else 0.0)
-    if not np.isfinite(ga.cost):
-        raise EmaError(f"{log.source}: every simulation of the GA diverged; check the bounds "
-                       "and the fixed plant parameters", 1)
+    ms = None
+    if settings.search == "shooting":
+        from ema_cli.identify.shooting_fit import shooting_estimate
 
-    x = ga.x.copy()
-    nfev = njev = 0
-    status = "no polish"
-    restarted = False
-    stages: list[dict[str, Any]] = []
-    t0 = time.perf_counter()
-    if settings.polish:
-        for k, span in enumerate(spans):  # continuation over growing horizons, the whole log last
-            report(f"polish over {span:g} s", k, len(spans))
-            t1 = time.perf_counter()
-            res, nj = polish(problem.prefix(span), x, settings.max_iter)
-            x, status = res.x, str(res.message)
-            nfev += int(res.nfev)
-            njev += nj
-            stages.append({"horizon_s": span, "function_evaluations": int(res.nfev),
-                           "jacobian_evaluations": nj, "J": float(2.0 * res.cost),
-                           "x": {n: float(v) for n, v in zip(problem.names, x, strict=True)},
-                           "wall_time_s": time.perf_counter() - t1})
-    timings["polish_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        sh = settings.shooting
+        ms = shooting_estimate(problem, notes, n_starts=sh.starts, segment_s=sh.segment_s,
+                               dt_search=problem.ga_dt, seed=settings.seed,
+                               max_iter=sh.max_iter,
+                               polish_iter=settings.max_iter if settings.polish else 0,
+                               report=report)
+        x = ms.x.copy()
+        x_first, cost_first, history = ms.x_ms, ms.search.cost, None
+        spans, stages, restarted = [log.duration], [], False
+        nfev = int(ms.polish.get("function_evaluations", 0))
+        njev = int(ms.polish.get("jacobian_evaluations", 0))
+        status = str(ms.polish.get("status", "no polish"))
+        timings["search_s"] = time.perf_counter() - t0
+        timings["ga_s"] = 0.0
+        timings["polish_s"] = ms.timings.get("polish_s", 0.0)
+        sp = ms.search.sp
+        throughput = sp.kernel_steps / sp.kernel_s if sp.kernel_s > 0 else 0.0
+    else:
+        t0 = time.perf_counter()
+        spans = horizons(log.duration, settings.ga_horizon_s if settings.polish else None)
+        ga_problem = problem.prefix(spans[0])
+        opts = preset("improved", pop=settings.ga.pop, generations=settings.ga.generations,
+                      patience=settings.ga.patience)
+        ga = run_ga(ga_problem, opts,
+                    np.random.default_rng(np.random.SeedSequence(settings.seed)))
+        timings["ga_s"] = time.perf_counter() - t0
+        throughput = (ga_problem.kernel_steps / ga_problem.kernel_s if ga_problem.kernel_s > 0
+                      else 0.0)
+        if not np.isfinite(ga.cost):
+            raise EmaError(f"{log.source}: every simulation of the GA diverged; check the "
+                           "bounds and the fixed plant parameters", 1)
+
+        x = ga.x.copy()
+        nfev = njev = 0
+        status = "no polish"
+        restarted = False
+        stages: list[dict[str, Any]] = []
+        t0 = time.perf_counter()
+        if settings.polish:
+            for k, span in enumerate(spans):  # continuation: growing horizons, the whole log last
+                report(f"polish over {span:g} s", k, len(spans))
+                t1 = time.perf_counter()
+                res, nj = polish(problem.prefix(span), x, settings.max_iter)
+                x, status = res.x, str(res.message)
+                nfev += int(res.nfev)
+                njev += nj
+                stages.append({"horizon_s": span, "function_evaluations": int(res.nfev),
+                               "jacobian_evaluations": nj, "J": float(2.0 * res.cost),
+                               "x": {n: float(v)
+                                     for n, v in zip(problem.names, x, strict=True)},
+                               "wall_time_s": time.perf_counter() - t1})
+        timings["polish_s"] = time.perf_counter() - t0
+        x_first, cost_first, history = ga.x, ga.cost, ga.history
 
     t0 = time.perf_counter()
     report("uncertainty and alpha profile")
@@ -345,7 +394,7 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
         grid, slc, prof = alpha_scan(problem, x, r, J, settings.profile_points)
         cost = float(r @ r)
         k = int(np.argmin(slc))
-        if slc[k] < (1.0 - RESTART_MARGIN) * cost and settings.polish:
+        if slc[k] < (1.0 - RESTART_MARGIN) * cost and settings.polish and ms is None:
             x1 = x.copy()
             x1[problem.names.index("alpha")] = grid[k]
             res, nj = polish(problem, x1, settings.max_iter)
@@ -358,15 +407,27 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
                 grid, slc, prof = alpha_scan(problem, x, r, J, settings.profile_points)
     timings["uncertainty_profile_s"] = time.perf_counter() - t0
 
-    cov, cond, dof = covariance(J, r, problem.groups())
-    unc = assess(problem.names, x, cov, dof, cond, problem.lower, problem.upper)
+    if ms is None:
+        cov, cond, dof = covariance(J, r, problem.groups())
+        unc = assess(problem.names, x, cov, dof, cond, problem.lower, problem.upper)
+    elif ms.source == "whole-log polish":  # segments as clusters: correlated model error
+        cov, cond, dof = covariance_clustered(J, r, ms.search.sp.groups())
+        unc = assess(problem.names, x, cov, dof, cond, problem.lower, problem.upper)
+    else:
+        unc = ms.unc_ms
     for j, n in enumerate(problem.names):
         span = problem.upper[j] - problem.lower[j]
         if min(x[j] - problem.lower[j], problem.upper[j] - x[j]) <= 1e-6 * span:
             warnings.append(f"{n} = {x[j]:.6g} {BY_NAME[n].unit} sits on its bound "
                             f"[{problem.lower[j]:g}, {problem.upper[j]:g}]: widen the bounds "
                             "(its interval assumes an interior optimum)")
-    smooth = quadratic_check(problem, x, r, J, unc)
+    smooth = (quadratic_check(problem, x, r, J, unc) if ms is None or
+              ms.source == "whole-log polish" else np.full(x.shape[0], np.nan))
+    if ms is not None and not ms.confirmed:
+        for j in range(x.shape[0]):
+            unc.determined[j] = False
+            unc.reasons[j].append("the optimum is not confirmed: " + "; ".join(ms.reasons))
+        warnings.append("the optimum is NOT confirmed: " + "; ".join(ms.reasons))
     for j, ratio in enumerate(smooth):
         if np.isfinite(ratio) and not 1.0 / QUADRATIC_RATIO <= ratio <= QUADRATIC_RATIO:
             unc.determined[j] = False
@@ -380,9 +441,9 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
             + " (see identification.json, parameters.*.not_determined_because)")
     Y = problem.predict(x[None])[0]
     timings["total_s"] = time.perf_counter() - t_start
-    fit = ClosedLoopFit(settings, problem, ga.x, ga.cost, x, float(r @ r), r, J, unc, Y,
-                        ga.history, notes, grid, slc, prof, nfev, njev, status, restarted,
-                        spans, stages, timings, throughput, warnings, smooth)
+    fit = ClosedLoopFit(settings, problem, x_first, cost_first, x, float(r @ r), r, J, unc, Y,
+                        history, notes, grid, slc, prof, nfev, njev, status, restarted,
+                        spans, stages, timings, throughput, warnings, smooth, ms)
     ratios = fit.rms_over_scale()
     high = {c: v for c, v in ratios.items()
             if notes[c] == NOISE_NOTE and v > NOISE_LEVEL_RATIO}

@@ -34,6 +34,10 @@ DEFAULT_GA_HORIZON_S = 1.0  # the GA fits the log's first second (docs/identific
 MAX_CL_POP = 4096  # the largest closed-loop population [individuals]
 MAX_CL_GENERATIONS = 10_000  # the most closed-loop generations
 MAX_NOISE_PCT = 100.0  # the largest noise of synthetic data [% of the RMS]
+DEFAULT_STARTS = 8  # multiple shooting: Sobol starts over the bounds
+DEFAULT_SEGMENT_S = 0.2  # multiple shooting: segment length [s]
+DEFAULT_MS_ITER = 60  # multiple shooting: most joint LM iterations of a start
+MAX_STARTS = 256  # the most multiple-shooting starts
 
 
 def _check_plant(v: dict[str, Any]) -> dict[str, Any]:
@@ -55,6 +59,16 @@ class ClosedLoopGA(Strict):
         description="evaluated generations, the initial one included")
     patience: NonNegInt = Field(0, le=MAX_CL_GENERATIONS,
                                 description="early stop after N stale generations (0: off)")
+
+
+class ClosedLoopShooting(Strict):
+    """The multiple-shooting search of a closed-loop fit (docs/identification.md)."""
+
+    starts: PositiveInt = Field(DEFAULT_STARTS, ge=2, le=MAX_STARTS,
+                                description=f"Sobol starts over the bounds, 2 .. {MAX_STARTS}")
+    segment_s: PositiveFloat = Field(DEFAULT_SEGMENT_S, description="segment length [s]")
+    max_iter: PositiveInt = Field(DEFAULT_MS_ITER, le=1000,
+                                  description="most joint Levenberg-Marquardt iterations")
 
 
 class ClosedLoopSettings(Strict):
@@ -80,6 +94,10 @@ class ClosedLoopSettings(Strict):
         DEFAULT_GA_HORIZON_S, description="the GA fits the log's first ga_horizon_s [s]; the "
         "polish then doubles the horizon up to the whole log (null, or polish: false: the "
         "GA fits the whole log)")
+    search: Literal["shooting", "ga"] = Field(
+        "shooting", description="shooting: multiple shooting from many starts (default); ga: "
+        "the GA over the first ga_horizon_s, then a polish over growing horizons")
+    shooting: ClosedLoopShooting = Field(default_factory=ClosedLoopShooting)
     ga: ClosedLoopGA = Field(default_factory=ClosedLoopGA)
     polish: bool = Field(True, description="least-squares polish after the GA")
     max_iter: PositiveInt = Field(DEFAULT_MAX_ITER, le=1000,
@@ -114,6 +132,10 @@ class ClosedLoopSettings(Strict):
             check_free(self.free, self.plant)
         except EmaError as exc:
             raise ValueError(exc.message) from None
+        if self.search == "shooting" and self.shooting.segment_s < 20 * (self.ga_dt_s
+                                                                        or self.dt_s):
+            raise ValueError(f"shooting.segment_s ({self.shooting.segment_s:g} s) must be at "
+                             "least 20 steps of ga_dt_s")
         if self.ga_dt_s is not None and self.ga_dt_s < self.dt_s:
             raise ValueError(f"ga_dt_s ({self.ga_dt_s:g} s) must not be finer than dt_s "
                              f"({self.dt_s:g} s)")

@@ -102,6 +102,39 @@ def covariance(J: np.ndarray, r: np.ndarray,
     return cov, cond, dof
 
 
+def covariance_clustered(J: np.ndarray, r: np.ndarray, clusters: Sequence[np.ndarray]
+                         ) -> tuple[np.ndarray, float, int]:
+    """The cluster-robust covariance of a least-squares estimate -> (cov[p, p], cond, dof).
+
+    ``clusters`` are index arrays of the residuals (e.g. the samples of every channel in one
+    time segment of a log): residuals may be correlated inside a cluster (model error,
+    coloured noise), not across. ``A = J^T J``, ``B = G/(G-1) sum_k (J_k^T r_k)(J_k^T r_k)^T``,
+    cov = ``A^-1 B A^-1``; ``dof = G - 1`` for Student's t (G clusters). Near-null directions
+    of the column-scaled J get an infinite variance, as in :func:`covariance`.
+    """
+    N, p = J.shape
+    G = len(clusters)
+    dof = max(G - 1, 1)
+    norms = np.linalg.norm(J, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    Js = J / norms
+    U, s, Vt = np.linalg.svd(Js, full_matrices=False)
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else np.inf
+    keep = s > s[0] / MAX_COND
+    inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+    Ainv_s = (Vt.T * inv_s**2) @ Vt
+    B = np.zeros((p, p))
+    for idx in clusters:
+        sc = Js[idx].T @ r[idx]
+        B += np.outer(sc, sc)
+    B *= G / max(G - 1, 1)
+    cov = (Ainv_s @ B @ Ainv_s) / np.outer(norms, norms)
+    for k in np.flatnonzero(~keep):
+        for j in np.flatnonzero(np.abs(Vt[k]) > NULL_SHARE):
+            cov[j, j] = np.inf
+    return cov, cond, dof
+
+
 def assess(names: Sequence[str], x: np.ndarray, cov: np.ndarray, dof: int, cond: float,
            lower: np.ndarray | None = None, upper: np.ndarray | None = None) -> Uncertainty:
     """Standard errors, intervals, correlations and the determined flags of an estimate.

@@ -111,7 +111,17 @@ PARAMS: tuple[Param, ...] = (
     Param("Ts", "s", 0.0, "controller sample time (0: continuous); a whole multiple of dt"),
     Param("q_pos", "rad", 0.0, "position sensor quantum, 2*pi/counts per rev (0: none)"),
     Param("q_speed", "rad/s", 0.0, "speed sensor resolution (0: none)"),
+    # initial state (default: at rest at 0); a closed-loop fit starts its log segments here
+    Param("x0_theta_m", "rad", 0.0, "initial motor angle", nonnegative=False),
+    Param("x0_w_m", "rad/s", 0.0, "initial motor speed", nonnegative=False),
+    Param("x0_i", "A", 0.0, "initial armature current", nonnegative=False),
+    Param("x0_theta_L", "rad", 0.0, "initial load angle", nonnegative=False),
+    Param("x0_w_L", "rad/s", 0.0, "initial load speed", nonnegative=False),
+    Param("x0_z", "rad", 0.0, "initial LuGre bristle deflection", nonnegative=False),
+    Param("x0_xI", "rad", 0.0, "initial speed-PI integral", nonnegative=False),
 )
+INITIAL_STATE = ("x0_theta_m", "x0_w_m", "x0_i", "x0_theta_L", "x0_w_L", "x0_z", "x0_xI")
+"""The initial-state parameters, in the order of ``model.plant.STATES``."""
 FLAGS = ("friction", "locked")
 CONTROLLER_PARAMS = ("Kpp", "Kps", "Kis", "fb_motor", "dzi_v", "dzi_band", "ff_fc", "ff_fs",
                      "ff_vs", "ff_sigma2", "ff_sigma0", "ff_sigma1", "ff_band", "notch_hz",

@@ -121,6 +121,26 @@ def fitted_config(fit: ClosedLoopFit, reference: str) -> dict[str, Any]:
     }
 
 
+def _search_text(fit: ClosedLoopFit) -> str:
+    """How the optimum was searched, and the verdict on it (summary.md)."""
+    ms = fit.shooting
+    if ms is None:
+        return ("Search: GA on the first " + (f"{fit.horizons[0]:g} s" if fit.horizons else "-")
+                + " of the log, least-squares polish over the horizons " + ", ".join(
+                    f"{s['horizon_s']:g} s (J {s['J']:.6g})" for s in fit.stages) + ".")
+    s = ms.search
+    verdict = ("**Optimum confirmed**" if ms.confirmed else
+               "**Optimum NOT confirmed**: " + "; ".join(ms.reasons))
+    pol = ms.polish
+    kept = ("kept" if pol.get("kept") else "not kept: " + "; ".join(
+        pol.get("why_not", [pol.get("why", "")])))
+    return (f"Search: multiple shooting, {s.sp.seg.n} segments of the log, {len(s.starts_x)} "
+            f"Sobol starts, joint Levenberg-Marquardt with successive halving; the "
+            f"{len(s.final_cost)} finishing starts end at J = "
+            + ", ".join(f"{c:.6g}" for c in s.final_cost) + f" ({s.agree} agree). "
+            f"Whole-log polish: {kept}. Estimate from the {ms.source}.\n\n{verdict}.")
+
+
 def closed_loop_summary(fit: ClosedLoopFit) -> str:
     """summary.md of a closed-loop identification."""
     js = fit.to_json()
@@ -146,9 +166,7 @@ def closed_loop_summary(fit: ClosedLoopFit) -> str:
         "Correlations: " + "; ".join(
             f"{a}–{b} {fit.uncertainty.corr[i, k]:+.3f}"
             for i, a in enumerate(fit.names) for k, b in enumerate(fit.names) if k > i), "",
-        "Search: GA on the first " + (f"{fit.horizons[0]:g} s" if fit.horizons else "-")
-        + " of the log, least-squares polish over the horizons " + ", ".join(
-            f"{s['horizon_s']:g} s (J {s['J']:.6g})" for s in fit.stages) + ".", "",
+        _search_text(fit), "",
         "Timings: " + ", ".join(f"{k} {v:.2f}" for k, v in fit.timings.items())
         + f"; kernel throughput in the GA {fit.ga_throughput / 1e6:.1f} M steps/s.", ""]
     if fit.warnings:

@@ -68,7 +68,7 @@ from ema_cli.model.controller import (
 )
 from ema_cli.model.elements import dead_zone_nb, saturate_nb
 from ema_cli.model.lugre import bristle_step_nb
-from ema_cli.model.params import INDEX, N_PARAMS
+from ema_cli.model.params import INDEX, INITIAL_STATE, N_PARAMS
 from ema_cli.model.plant import (
     N_STATES,
     STATE_INDEX,
@@ -98,6 +98,7 @@ _FFC, _FFS, _FFV, _FFS2, _FFB = (INDEX[k] for k in ("ff_fc", "ff_fs", "ff_vs", "
                                                     "ff_band"))
 _NHZ, _NDEPTH, _NZETA = INDEX["notch_hz"], INDEX["notch_depth"], INDEX["notch_zeta"]
 _FFSIG0, _FFSIG1 = INDEX["ff_sigma0"], INDEX["ff_sigma1"]
+_XINIT = INDEX[INITIAL_STATE[0]]  # first of the N_STATES initial-state columns, STATES order
 
 # signal columns (W's recording rows, sig) and metric columns (met)
 _S_BRISTLE_Z = SIG["bristle_z"]
@@ -502,6 +503,8 @@ def _init(W, n_real, step_info, qidx, dt, n_steps):
         W[_D_NS, j] = np.floor(ts / dt + 0.5) if ts > 0.0 else 0.0
         W[_D_ALIVE, j] = 1.0
         W[_D_KEND, j] = n_steps + 1.0  # the step it diverged at (never, unless set)
+        for s in range(N_STATES):  # the initial state (model.params.INITIAL_STATE)
+            W[_X0 + s, j] = W[_P0 + _XINIT + s, j]
         q = qidx[jj]
         W[_D_ISSTEP, j] = step_info[q, 0]
         W[_D_STEP, j] = step_info[q, 1]

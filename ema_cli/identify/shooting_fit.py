@@ -1,0 +1,172 @@
+"""The closed-loop fit by multiple shooting (the default search of ``ema identify
+--closed-loop``): search, uncertainty, whole-log polish and the verdict on the optimum.
+
+1. :func:`ema_cli.identify.shooting_search.search`: the log cut into segments, many starts
+   over the bounds, joint Levenberg-Marquardt on parameters and segment states.
+2. Uncertainty of the multiple-shooting estimate: the segment states profiled out (each
+   segment's parameter Jacobian projected off its own state directions) and a cluster-robust
+   sandwich with the segments as clusters (residuals may be correlated inside a segment: model
+   error, coloured noise), Student's t with G - 1 degrees of freedom.
+3. A whole-log polish (single shooting at the fine step, bounded least squares) from the
+   multiple-shooting optimum. It is kept only when the whole log, simulated from rest, reaches
+   the noise level there AND every polished parameter stays inside the multiple-shooting 95 %
+   interval; then its intervals are the cluster-robust ones of the whole-log residuals.
+   Otherwise the multiple-shooting estimate stands and the reason is recorded.
+4. The verdict: the optimum is *confirmed* when at least two of the starts that ran to the end
+   reach the best cost (within :data:`~ema_cli.identify.shooting_search.AGREE_REL`), the
+   segments' fit reaches the noise level of every channel scaled by its noise estimate, and no
+   parameter sits on a bound. Otherwise every parameter is reported as not determined, with
+   the reason: the tool does not print a confident number it could not confirm.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ema_cli.identify.closed_loop import NOISE_NOTE, ClosedLoopProblem
+from ema_cli.identify.shooting_search import ShootingSearch, search
+from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
+
+NOISE_LEVEL_RATIO = 2.0  # a channel fits when its residual RMS is within this x its noise [-]
+BOUND_FRACTION = 1e-6  # a parameter within this fraction of its range from a bound sits on it
+
+
+@dataclass
+class ShootingOutcome:
+    """The multiple-shooting stage of a closed-loop fit (SI)."""
+
+    search: ShootingSearch
+    x_ms: np.ndarray
+    unc_ms: Uncertainty
+    ms_ratios: dict[str, float]  # per channel: segments' residual RMS / scale [-]
+    x: np.ndarray  # the estimate kept (polished or multiple shooting)
+    source: str  # "whole-log polish" or "multiple shooting"
+    polish: dict[str, Any] = field(default_factory=dict)
+    confirmed: bool = False
+    reasons: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        s = self.search
+        names = s.sp.base.names
+        return {
+            "segments": int(s.sp.seg.n), "starts": int(s.starts_x.shape[0]),
+            "finished_starts": {"cost": s.final_cost.tolist(),
+                                "x": [dict(zip(names, map(float, x), strict=True))
+                                      for x in s.final_x]},
+            "agree": s.agree, "iterations": s.iterations, "cost_ms": s.cost,
+            "x_ms": dict(zip(names, map(float, self.x_ms), strict=True)),
+            "ci95_ms": {n: [float(self.unc_ms.ci_low[j]), float(self.unc_ms.ci_high[j])]
+                        for j, n in enumerate(names)},
+            "segments_rms_over_scale": self.ms_ratios,
+            "estimate_from": self.source, "polish": self.polish,
+            "optimum_confirmed": self.confirmed, "not_confirmed_because": self.reasons,
+            "kernel_steps": int(s.sp.kernel_steps), "kernel_s": float(s.sp.kernel_s),
+            "timings_s": {**s.timings, **self.timings},
+        }
+
+
+def channel_ratios(problem: ClosedLoopProblem, r: np.ndarray) -> dict[str, float]:
+    """Per channel, the RMS of the weighted residuals ``r`` (channel after channel) [-]."""
+    n = problem.log.n
+    return {c: float(np.sqrt(np.mean(r[j * n:(j + 1) * n] ** 2)))
+            for j, c in enumerate(problem.channels)}
+
+
+def too_high(ratios: dict[str, float], notes: dict[str, str]) -> dict[str, float]:
+    """The channels scaled by their noise estimate whose ratio exceeds the noise level."""
+    return {c: v for c, v in ratios.items() if notes[c] == NOISE_NOTE and v > NOISE_LEVEL_RATIO}
+
+
+def ms_uncertainty(res: ShootingSearch, dt: float) -> tuple[Uncertainty, np.ndarray]:
+    """Cluster-robust uncertainty of the multiple-shooting estimate (states profiled out) ->
+    (uncertainty, the data residuals at the estimate)."""
+    sp = res.sp
+    b = sp.base
+    r, Jx, Js = sp.jacobian_many(res.V[None], dt)
+    r, Jx, Js = r[0], Jx[0], Js[0]
+    Jx = Jx / (b.upper - b.lower)[None, :]  # d r / d x (SI), from d r / d u
+    Jp = np.empty_like(Jx)
+    clusters = sp.groups()
+    for idx in clusters:
+        coef, *_ = np.linalg.lstsq(Js[idx], Jx[idx], rcond=None)
+        Jp[idx] = Jx[idx] - Js[idx] @ coef
+    cov, cond, dof = covariance_clustered(Jp, r, clusters)
+    return assess(b.names, res.x, cov, dof, cond, b.lower, b.upper), r
+
+
+def on_bound(problem: ClosedLoopProblem, x: np.ndarray) -> list[str]:
+    """The free parameters that sit on a bound."""
+    span = problem.upper - problem.lower
+    return [n for j, n in enumerate(problem.names)
+            if min(x[j] - problem.lower[j], problem.upper[j] - x[j]) <= BOUND_FRACTION * span[j]]
+
+
+def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_starts: int,
+                      segment_s: float, dt_search: float, seed: int, max_iter: int,
+                      polish_iter: int, report: Any = None) -> ShootingOutcome:
+    """Search, uncertainty, polish and verdict (module docstring); the polish at the
+    problem's fine step ``problem.dt``."""
+    from ema_cli.identify.closed_loop_fit import polish
+
+    res = search(problem, n_starts=n_starts, segment_s=segment_s, dt=dt_search, seed=seed,
+                 max_iter=max_iter, report=report)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    unc_ms, r_ms = ms_uncertainty(res, dt_search)
+    ratios = channel_ratios(problem, r_ms)
+    timings["ms_uncertainty_s"] = time.perf_counter() - t0
+    reasons = []
+    n_fin = len(res.final_cost)
+    if res.agree < 2:
+        reasons.append(f"only {res.agree} of the {n_fin} starts that ran to the end reached "
+                       f"the best cost (J = {res.cost:.6g}; the others: "
+                       + ", ".join(f"{c:.6g}" for c in res.final_cost[1:]) + "): the search "
+                       "may have missed a better optimum (try more starts)")
+    high = too_high(ratios, notes)
+    if high:
+        reasons.append("the segments do not fit the log to its noise level (" + ", ".join(
+            f"{c} {v:.3g} x its noise estimate" for c, v in high.items()) + "): a local "
+            "minimum or a model that cannot explain the log")
+    edge = on_bound(problem, res.x)
+    if edge:
+        reasons.append(f"{', '.join(edge)} on a bound of the search: widen the bounds")
+    out = ShootingOutcome(res, res.x.copy(), unc_ms, ratios, res.x.copy(), "multiple shooting",
+                          confirmed=not reasons, reasons=reasons, timings=timings)
+    if polish_iter <= 0:
+        out.polish = {"kept": False, "why": "no polish (polish: false)"}
+        return out
+    t0 = time.perf_counter()
+    if report:
+        report("whole-log polish", 0, 1)
+    pol, njev = polish(problem, res.x, polish_iter)
+    timings["polish_s"] = time.perf_counter() - t0
+    r_pol = np.asarray(pol.fun)
+    pr = channel_ratios(problem, r_pol)
+    inside = [bool(unc_ms.ci_low[j] <= pol.x[j] <= unc_ms.ci_high[j])
+              for j in range(pol.x.shape[0])]
+    why = []
+    high_p = too_high(pr, notes)
+    if high_p:
+        why.append("the whole log simulated from rest does not reach the noise level (" +
+                   ", ".join(f"{c} {v:.3g} x" for c, v in high_p.items()) + ")")
+    if not all(inside):
+        why.append("it leaves the multiple-shooting 95 % interval of " + ", ".join(
+            n for n, ok in zip(problem.names, inside, strict=True) if not ok))
+    out.polish = {"kept": not why, "why_not": why, "x": dict(zip(problem.names,
+                                                                 map(float, pol.x),
+                                                                 strict=True)),
+                  "J": float(r_pol @ r_pol), "rms_over_scale": pr,
+                  "function_evaluations": int(pol.nfev), "jacobian_evaluations": njev,
+                  "status": str(pol.message)}
+    if not why:
+        out.x = pol.x.copy()
+        out.source = "whole-log polish"
+    return out
+
+
+__all__ = ["ShootingOutcome", "shooting_estimate"]
