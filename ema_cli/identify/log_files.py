@@ -317,7 +317,13 @@ def read_log(path: str | Path, required: Sequence[str], optional: Sequence[str] 
     used = [*required, *present]
     values = {}
     for ch in used:
-        values[ch] = log_to_si(table.column(names[ch]), units[ch], LOG_CHANNELS[ch][0])
+        try:
+            raw = table.column(names[ch])
+        except EmaError as exc:
+            if names[ch] == ch:
+                raise
+            raise EmaError(f"{exc.message} ({COLUMNS_OPTION} {ch}={columns[ch]})") from None
+        values[ch] = log_to_si(raw, units[ch], LOG_CHANNELS[ch][0])
     lengths = {ch: v.shape[0] for ch, v in values.items()}
     first = used[0]
     for ch in used[1:]:

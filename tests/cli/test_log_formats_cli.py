@@ -1,7 +1,7 @@
 """`ema identify --closed-loop --data LOG.parquet|.mat --columns ... --window ...` through typer's
-CliRunner as far as the log reaches the fit (the fit itself is stubbed: it is tested in
-tests/unit/test_closed_loop.py and tests/cli/test_identify_logs_cli.py): the options and the
-same keys in a YAML config give the log the loader gives; misuse is one line, nothing written.
+CliRunner: as far as the log reaches the fit (the fit stubbed), the options and the same keys
+in a YAML config give the log the loader gives; misuse is one line, nothing written; and one
+real short fit of a renamed, rescaled, windowed Parquet log (~9 s) lands on the truth.
 """
 
 from __future__ import annotations
@@ -142,3 +142,37 @@ def test_bad_map_or_window_one_line_nothing_written(logs, tmp_path, change, args
 def test_options_of_other_modes(tmp_path, args, expect):
     r, text = invoke("identify", *args, "--out", tmp_path / "never")
     assert r.exit_code == 2 and expect in text, text
+
+
+def test_real_short_fit_of_a_renamed_parquet_log_in_other_units(tmp_path):
+    """The whole way: a noise-free 2 s synthetic log (from 7 s, ms, rad, rad/s, mA) as Parquet,
+    mapped back and windowed to its first second, fitted with tight bounds and a tiny GA (the
+    budget of test_identify_logs_cli.py): ~10 s on 2 cores, measured."""
+    import json
+
+    import pandas as pd
+
+    from ema_cli.identify.synthetic_logs import closed_loop_log
+
+    syn = closed_loop_log({}, 0.0, 0, duration_s=2.0)
+    c = syn.columns
+    pd.DataFrame({"time": c["t_s"] * 1000 + 7000, "cmd": c["theta_ref_deg"] * DEG,
+                  "pos": c["theta_load_deg"] * DEG, "wm": c["omega_motor_rpm"] * RPM,
+                  "i": c["current_a"] * 1000}).to_parquet(tmp_path / "syn.parquet")
+    cols = ["t_s=time:ms", "theta_ref_deg=cmd:rad", "theta_load_deg=pos:rad",
+            "omega_motor_rpm=wm:rad/s", "current_a=i:mA"]
+    free = ["kL=560,620", "alpha=0.0028,0.0032", "Fc=0.019,0.021", "sigma2=9e-5,1.1e-4"]
+    out = tmp_path / "fit"
+    r, text = invoke("identify", "--closed-loop", "--data", tmp_path / "syn.parquet",
+                     *[x for s in cols for x in ("--columns", s)], "--window", "7,8",
+                     *[x for s in free for x in ("--free", s)], "--pop", "8", "--generations",
+                     "2", "--set", "ga_dt_s=1e-4", "--set", "profile_points=5", "--out", out)
+    assert r.exit_code == 0, text
+    js = json.loads((out / "identification.json").read_text())
+    assert js["data"]["n_samples"] == 1001 and js["data"]["t0_s"] == 7.0
+    assert js["data"]["duration_s"] == pytest.approx(1.0, abs=1e-12)
+    assert js["data"]["channels"] == ["theta_load_deg", "omega_motor_rpm", "current_a"]
+    # noise-free data from the same simulator and step: the polish lands on the truth (measured
+    # 1e-13 relative); 1e-6 leaves room for other BLAS/CPU rounding
+    for name in ("kL", "alpha", "Fc", "sigma2"):
+        assert js["parameters"][name]["value"] == pytest.approx(syn.truth[name], rel=1e-6), name

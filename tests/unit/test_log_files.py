@@ -278,6 +278,10 @@ def _errors(tmp_path) -> dict[str, tuple]:
     out["map_channel"] = (out["map_missing"][0], "map_missing.mat'): unknown channel "
                           "'torque_nm'; expected one of t_s, theta_ref_deg", {"columns": {
                               **RENAMED, "torque_nm": "pos"}})
+    sio.savemat(d / "map_matrix.mat", dict(ren, pos=np.ones((N, 3))))
+    out["map_matrix"] = (d / "map_matrix.mat", f"variable 'pos' is a {N}x3 matrix, not a "
+                         "vector; expected a numeric vector (N, Nx1 or 1xN) (--columns "
+                         "theta_load_deg=pos:rad)", {"columns": RENAMED})
     case("map_constant", ".csv", dict(ren, pos=np.full(N, 0.5)), expect="column 'pos' "
          "(theta_load_deg) is constant", columns=RENAMED)
     case("win_out", ".parquet", b, expect=f"--window 9,10.5: the window passes the ends of "
@@ -295,7 +299,7 @@ ERRORS = ["nan_pq", "inf_v5", "nan_v73", "text_pq", "char_v5", "char_v73", "cplx
           "short_v5", "short_v73", "matrix_v5", "matrix_v73", "empty_var", "empty.csv",
           "empty.parquet", "empty.mat", "header", "text_mat", "trunc73", "trunc5", "junk_pq",
           "ext", "none", "lacks_v5", "lacks_pq", "late_t", "map_missing", "map_missing_list",
-          "map_unit", "map_unknown_unit", "map_channel", "map_constant", "win_out",
+          "map_unit", "map_unknown_unit", "map_channel", "map_matrix", "map_constant", "win_out",
           "win_order", "win_few"]
 
 
