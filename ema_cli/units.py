@@ -1,6 +1,7 @@
 """Unit conversions between SI (inside the code) and the paper's units (configs, CSVs, plots)."""
 
 import math
+from typing import Any
 
 DEG = math.pi / 180.0
 """One degree in radians."""
@@ -46,6 +47,29 @@ SI_UNIT = {"time": "s", "angle": "rad", "frequency": "Hz", "rate": "rad/s",
            "stiffness": "N*m/rad", "current": "A", "torque": "N*m", "voltage": "V",
            "percent": "%", "decibel": "dB"}
 """The SI (internal) unit of each dimension."""
+
+
+LOG_UNITS: dict[str, dict[str, tuple[float, float]]] = {
+    "time": {"s": (1.0, 1.0), "ms": (1.0, 1e3), "us": (1.0, 1e6)},
+    "angle": {"deg": (DEG, 1.0), "rad": (1.0, 1.0), "mrad": (1.0, 1e3)},
+    "speed": {"rpm": (RPM, 1.0), "rad/s": (1.0, 1.0), "deg/s": (DEG, 1.0)},
+    "current": {"A": (1.0, 1.0), "mA": (1.0, 1e3)},
+    "voltage": {"V": (1.0, 1.0), "mV": (1.0, 1e3)},
+}
+"""Units of a log column (``ema identify --columns CHANNEL=COLUMN:UNIT``): kind -> unit ->
+(factor, divisor), SI = value * factor / divisor. The decimal prefixes divide by an exact
+integer, so 1500 ms is exactly 1.5 s (a product with 1e-3 would round twice)."""
+
+
+def log_to_si(values: Any, unit: str, kind: str) -> Any:
+    """Log values in ``unit`` (a unit of ``kind`` in :data:`LOG_UNITS`) -> SI (floats or
+    arrays); a factor or divisor of 1 leaves the values bit for bit."""
+    factor, divisor = LOG_UNITS[kind][unit]
+    if factor != 1.0:
+        values = values * factor
+    if divisor != 1.0:
+        values = values / divisor
+    return values
 
 
 def units_of(dimension: str) -> list[str]:

@@ -100,15 +100,20 @@ class SyntheticData:
 
 def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = None,
                          **settings: Any) -> ClosedLoopIdentification:
-    """Fit the simulator to a closed-loop log (``data=`` the CSV), as ``ema identify
-    --closed-loop`` does; settings: ``identify.log_settings.ClosedLoopSettings``."""
+    """Fit the simulator to a closed-loop log (``data=`` the file: CSV, Parquet or MATLAB .mat;
+    ``columns=`` a column map, ``window=`` (T0, T1) [s]), as ``ema identify --closed-loop``
+    does; settings: ``identify.log_settings.ClosedLoopSettings``."""
     from ema_cli.config.loader import load_config
+    from ema_cli.identify.closed_loop import load_log
     from ema_cli.identify.closed_loop_fit import run_closed_loop
     from ema_cli.identify.log_settings import ClosedLoopSettings
 
     pairs = override_pairs(overrides) + list(settings.items())
     cfg = load_config(config, pairs, ClosedLoopSettings)
-    return ClosedLoopIdentification(run_closed_loop(cfg))
+    log = None
+    if cfg.data is not None:  # read here: the column map and the window belong to the reading
+        log = load_log(cfg.data, columns=cfg.columns, window=cfg.window)
+    return ClosedLoopIdentification(run_closed_loop(cfg, log))
 
 
 def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = None,

@@ -82,8 +82,15 @@ def identify_cmd(
         "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
                        "(default: synthetic data from the simulator).")] = None,
     columns: Annotated[list[str] | None, typer.Option(
-        "--columns", help="Map a column: NAME=FILE_COLUMN, e.g. torque_nm=T_meas; repeatable."
-    )] = None,
+        "--columns", help="Map a column, repeatable. Torque data: NAME=FILE_COLUMN, e.g. "
+                          "torque_nm=T_meas. --closed-loop: CHANNEL=COLUMN[:UNIT], e.g. "
+                          "theta_load_deg=pos:rad, t_s=time:ms; units: time s|ms|us, angle "
+                          "deg|rad|mrad, speed rpm|rad/s|deg/s, current A|mA, voltage V|mV "
+                          "(default: the channel's own).")] = None,
+    window: Annotated[str | None, typer.Option(
+        "--window", metavar="T0,T1",
+        help="--closed-loop: fit only the samples with T0 <= t <= T1, in seconds of the log's "
+             "own time (e.g. 0.5,2.5); it must lie within the log.")] = None,
     noise: Annotated[float | None, typer.Option(
         "--noise", help="Synthetic data: Gaussian noise, % of the torque RMS (seeded).")] = None,
     damping: Annotated[str | None, typer.Option(
@@ -113,9 +120,11 @@ def identify_cmd(
                       "repeatable (the options above win).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
     closed_loop: Annotated[bool, typer.Option(
-        "--closed-loop", help="Fit the whole simulator to a closed-loop log (--data LOG.csv: "
-                              "t_s, theta_ref_deg, theta_load_deg [, omega_motor_rpm, current_a, "
-                              "voltage_cmd_v]); output error, GA then least squares.")] = False,
+        "--closed-loop", help="Fit the whole simulator to a closed-loop log (--data LOG: .csv, "
+                              ".parquet or .mat (MATLAB v5/v7.3) with t_s, theta_ref_deg, "
+                              "theta_load_deg [, omega_motor_rpm, current_a, voltage_cmd_v], or "
+                              "mapped by --columns); output error, GA then least squares."
+    )] = False,
     friction_sweep: Annotated[bool, typer.Option(
         "--friction-sweep", help="Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a "
                                  "constant-speed sweep (--data SWEEP.csv: omega_rpm, torque_nm)."
@@ -141,13 +150,16 @@ def identify_cmd(
 
         torque_only = {"--k-range": k_range, "--alpha-range": alpha_range, "--c-range": c_range,
                        "--method": method, "--runs": runs, "--n-jobs": n_jobs,
-                       "--columns": columns, "--damping": damping, "--model": model, "--c": c,
+                       "--damping": damping, "--model": model, "--c": c,
                        "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits}
         run_log_mode(modes, config=config, data=data, noise=noise, seed=seed, pop=pop,
                      generations=generations, set_=set_, out=out, free=free,
-                     make_data=make_data,
+                     make_data=make_data, columns=columns, window=window,
                      torque_only=[k for k, v in torque_only.items() if v is not None])
         return
+    if window is not None:
+        raise EmaError("--window applies to --closed-loop, not to the torque-data "
+                       "identification")
     from ema_cli.api.identification import identify
     from ema_cli.config.loader import load_config
     from ema_cli.identify.problem import PARAM_UNITS

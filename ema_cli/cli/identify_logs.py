@@ -33,6 +33,23 @@ def _free_pairs(free: list[str] | None) -> list[tuple[str, Any]]:
     return pairs
 
 
+def parse_window(text: str) -> list[float]:
+    """``--window T0,T1`` -> [T0, T1] [s]; errors name the option and what is expected."""
+    import math
+
+    parts = [x.strip() for x in text.split(",")]
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        lo, hi = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise EmaError(f"--window: expected T0,T1 (two times in seconds, e.g. 0.5,2.5), got "
+                       f"{text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi)) or not lo < hi:
+        raise EmaError(f"--window: expected T0 < T1, two finite times in seconds, got {text}")
+    return [lo, hi]
+
+
 def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
                       free: list[str] | None) -> list[tuple[str, Any]]:
     """``pairs`` + the ``--free`` options. ``--free`` adds to the free set: to the config's
@@ -79,7 +96,8 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                  noise: float | None, seed: int | None, pop: int | None,
                  generations: int | None, set_: list[str] | None, out: Path | None,
                  free: list[str] | None, make_data: str | None,
-                 torque_only: list[str]) -> None:
+                 torque_only: list[str], columns: list[str] | None = None,
+                 window: str | None = None) -> None:
     """Check the options of a log mode (one mode; no torque-data options) and run it."""
     from ema_cli.report.rundir import check_output
 
@@ -93,6 +111,11 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                        f" to the torque-data identification, not to {mode}")
     if free and mode != "--closed-loop":
         raise EmaError(f"--free applies to --closed-loop, not to {mode}")
+    if columns and mode != "--closed-loop":
+        raise EmaError(f"--columns applies to --closed-loop and the torque-data "
+                       f"identification, not to {mode}")
+    if window is not None and mode != "--closed-loop":
+        raise EmaError(f"--window applies to --closed-loop, not to {mode}")
     if mode != "--make-data" and noise is not None:
         raise EmaError(f"--noise describes synthetic data (--make-data), not {mode}")
     if mode != "--closed-loop" and (pop is not None or generations is not None):
@@ -123,6 +146,10 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
             pairs.append(("ga.pop", pop))
         if generations is not None:
             pairs.append(("ga.generations", generations))
+        pairs += [(f"columns.{ch}", spec) for ch, spec in parse_assignments(columns,
+                                                                              "--columns")]
+        if window is not None:
+            pairs.append(("window", parse_window(window)))
         pairs = closed_loop_pairs(config, pairs, free)
         _closed_loop(config, pairs, out)
     else:

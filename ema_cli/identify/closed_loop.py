@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.friction_sweep import read_table, read_truth
+from ema_cli.identify.friction_sweep import read_truth
+from ema_cli.identify.log_files import read_log
 from ema_cli.model.params import BY_NAME, resolve, to_row
 from ema_cli.units import DEG, RPM
 
@@ -79,37 +80,76 @@ class ClosedLoopLog:
         return float(self.t[-1])
 
 
-def load_log(path: str | Path) -> ClosedLoopLog:
-    """Read and validate a closed-loop log. Errors name the file, the column and the line:
-    missing columns, empty/non-numeric/NaN/inf values, time not strictly increasing, fewer than
-    :data:`MIN_LOG_ROWS` rows or shorter than :data:`MIN_LOG_DURATION_S`, a constant channel."""
+def load_log(path: str | Path, *, columns: Mapping[str, str] | None = None,
+             window: Sequence[float] | None = None) -> ClosedLoopLog:
+    """Read and validate a closed-loop log: CSV, Parquet or MATLAB .mat (``identify.log_files``),
+    its columns found through the map ``columns`` (channel -> ``COLUMN[:UNIT]``), only the
+    samples with ``window[0] <= t <= window[1]`` [s, the log's own time] kept. Errors name the
+    file, the column and the line (CSV), row (Parquet) or index (MATLAB): missing columns,
+    empty/non-numeric/NaN/inf values, time not strictly increasing, a window outside the log,
+    fewer than :data:`MIN_LOG_ROWS` rows or shorter than :data:`MIN_LOG_DURATION_S`, a constant
+    channel. ``t0`` is the first time stamp kept; ``t`` starts at 0."""
     p = Path(path)
-    cols, present = read_table(p, LOG_REQUIRED, LOG_OPTIONAL)
-    t = cols["t_s"]
+    cols = read_log(p, LOG_REQUIRED, LOG_OPTIONAL, columns)
+    where = cols.table.where
+    t = cols.values["t_s"]
     n = t.shape[0]
     if n < MIN_LOG_ROWS:
         raise EmaError(f"data file '{p}' has {n} data rows; a closed-loop log needs at least "
                        f"{MIN_LOG_ROWS}")
     steps = np.diff(t)
     if np.any(steps <= 0):
-        line = int(np.flatnonzero(steps <= 0)[0]) + 3  # the second row of the pair
-        raise EmaError(f"data file '{p}': column 't_s' must be strictly increasing; it is not "
-                       f"at line {line} (t_s = {t[line - 2]:g} after {t[line - 3]:g})")
+        i = int(np.flatnonzero(steps <= 0)[0]) + 1  # the second sample of the pair
+        raise EmaError(f"data file '{p}': {cols.label('t_s')} must be strictly increasing; it "
+                       f"is not at {where(i)} (t_s = {t[i]:g} after {t[i - 1]:g})")
+    values = dict(cols.values)
+    source = f"file: {p}"
+    if window is not None:
+        keep = window_mask(t, window, p)
+        values = {k: v[keep] for k, v in values.items()}
+        t = values["t_s"]
+        source += f" (window {window[0]:g} .. {window[1]:g} s)"
     if t[-1] - t[0] < MIN_LOG_DURATION_S:
         raise EmaError(f"data file '{p}' spans {t[-1] - t[0]:g} s; a closed-loop log must "
                        f"span at least {MIN_LOG_DURATION_S:g} s")
-    if np.ptp(cols["theta_ref_deg"]) == 0:
-        raise EmaError(f"data file '{p}': column 'theta_ref_deg' is constant: the command does "
-                       "not excite the actuator")
+    if np.ptp(values["theta_ref_deg"]) == 0:
+        raise EmaError(f"data file '{p}': {cols.label('theta_ref_deg')} is constant: the "
+                       "command does not excite the actuator")
     channels = {}
-    for name in ("theta_load_deg", *present):
-        y = cols[name]
+    for name in ("theta_load_deg", *cols.present):
+        y = values[name]
         if np.ptp(y) == 0:
-            raise EmaError(f"data file '{p}': column '{name}' is constant ({y[0]:g}); drop it "
-                           "or check the logger")
-        channels[name] = y * CHANNELS[name][1]
-    return ClosedLoopLog(t - t[0], cols["theta_ref_deg"] * DEG, channels, f"file: {p}",
-                         float(t[0]), read_truth(p))
+            raise EmaError(f"data file '{p}': {cols.label(name)} is constant "
+                           f"({y[0] / CHANNELS[name][1]:g} {CHANNELS[name][2]}); drop it or "
+                           "check the logger")
+        channels[name] = y
+    return ClosedLoopLog(t - t[0], values["theta_ref_deg"], channels, source, float(t[0]),
+                         read_truth(p))
+
+
+WINDOW_SLACK = 0.5  # a window edge may pass the log's ends by this many median intervals [-]
+
+
+def window_mask(t: np.ndarray, window: Sequence[float], path: Path) -> np.ndarray:
+    """The samples of times ``t`` [s] inside ``window`` = (T0, T1) [s]: T0 <= t <= T1. Refuses
+    (EmaError naming the option, the file and the log's span) T0 >= T1, a window that passes
+    the log's ends by more than WINDOW_SLACK sample intervals, or one keeping fewer than
+    :data:`MIN_LOG_ROWS` samples."""
+    lo, hi = (float(window[0]), float(window[1]))
+    opt = f"--window {lo:g},{hi:g}"
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise EmaError(f"{opt} (data file '{path}'): expected T0 < T1, two finite times in "
+                       "seconds")
+    slack = WINDOW_SLACK * float(np.median(np.diff(t)))
+    if lo < t[0] - slack or hi > t[-1] + slack:
+        raise EmaError(f"{opt}: the window passes the ends of data file '{path}', which spans "
+                       f"{t[0]:g} .. {t[-1]:g} s (the log's own time)")
+    keep = (t >= lo) & (t <= hi)
+    n = int(keep.sum())
+    if n < MIN_LOG_ROWS:
+        raise EmaError(f"{opt}: the window keeps {n} sample(s) of data file '{path}'; a "
+                       f"closed-loop log needs at least {MIN_LOG_ROWS}")
+    return keep
 
 
 def noise_estimate(y: np.ndarray, t: np.ndarray) -> float:

@@ -10,6 +10,7 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from ema_cli.config.base import (
+    FiniteFloat,
     NonNegFloat,
     NonNegInt,
     PlainName,
@@ -75,9 +76,18 @@ class ClosedLoopSettings(Strict):
     """Everything one ``ema identify --closed-loop`` run needs."""
 
     name: PlainName = Field("closed-loop", description="study name (a folder name)")
-    data: str | None = Field(None, description="the log: CSV with t_s, theta_ref_deg, "
+    data: str | None = Field(None, description="the log: .csv/.txt, .parquet/.pq or .mat (MATLAB "
+                                               "v5 or v7.3) with t_s, theta_ref_deg, "
                                                "theta_load_deg [, omega_motor_rpm, current_a, "
-                                               "voltage_cmd_v]")
+                                               "voltage_cmd_v] (or mapped by columns)")
+    columns: dict[str, str] | None = Field(
+        None, description="column map: channel -> 'COLUMN[:UNIT]' (e.g. theta_load_deg: pos:rad; "
+                          "units: time s|ms|us, angle deg|rad|mrad, speed rpm|rad/s|deg/s, "
+                          "current A|mA, voltage V|mV; default the channel's own); null: the "
+                          "file's columns carry the channel names")
+    window: tuple[FiniteFloat, FiniteFloat] | None = Field(
+        None, description="[T0, T1]: fit only the samples with T0 <= t <= T1 [s, the log's own "
+                          "time]; null: the whole log")
     free: dict[str, tuple[float, float]] = Field(
         default_factory=lambda: dict(DEFAULT_FREE),
         description="free parameters -> [LO, HI] in SI (names of `ema params`)")
@@ -122,6 +132,25 @@ class ClosedLoopSettings(Strict):
             if key not in CHANNELS:
                 raise ValueError(f"{KEY_MARK}{key}{KEY_MARK}unknown channel; expected one of "
                                  f"{', '.join(CHANNELS)}")
+        return v
+
+    @field_validator("columns")
+    @classmethod
+    def _columns(cls, v: dict[str, str] | None) -> dict[str, str] | None:
+        from ema_cli.identify.log_files import parse_column_spec
+
+        for key, spec in (v or {}).items():
+            try:
+                parse_column_spec(key, spec)
+            except EmaError as exc:
+                raise ValueError(f"{KEY_MARK}{key}{KEY_MARK}{exc.message}") from None
+        return v
+
+    @field_validator("window")
+    @classmethod
+    def _window(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not v[1] > v[0]:
+            raise ValueError(f"needs T0 < T1, got [{v[0]:g}, {v[1]:g}]")
         return v
 
     @model_validator(mode="after")
