@@ -72,7 +72,8 @@ def identify_cmd(
         help="c search range LO HI when fitted [N*m*s/rad] (default 0 5).")] = None,
     method: Annotated[str | None, typer.Option(
         "--method", help="ga (improved GA, default), ga-paper (the paper's binary GA) or "
-                         "exact (least squares only).")] = None,
+                         "exact (least squares only); --closed-loop: shooting (default) or "
+                         "ga.")] = None,
     runs: Annotated[int | None, typer.Option(
         "--runs", help="GA runs with seeds SeedSequence(seed).spawn(N) (default 1).")] = None,
     n_jobs: Annotated[int | None, typer.Option(
@@ -123,7 +124,8 @@ def identify_cmd(
         "--closed-loop", help="Fit the whole simulator to a closed-loop log (--data LOG: .csv, "
                               ".parquet or .mat (MATLAB v5/v7.3) with t_s, theta_ref_deg, "
                               "theta_load_deg [, omega_motor_rpm, current_a, voltage_cmd_v], or "
-                              "mapped by --columns); output error, GA then least squares."
+                              "mapped by --columns); output error by multiple shooting (--method "
+                              "shooting, default) or GA then least squares (--method ga)."
     )] = False,
     friction_sweep: Annotated[bool, typer.Option(
         "--friction-sweep", help="Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a "
@@ -133,6 +135,8 @@ def identify_cmd(
         "--make-data", help="Write synthetic data with stated truths: closed-loop (a 4 s chirp "
                             "log) or friction-sweep; with --noise, --seed, --set plant.NAME=VALUE."
     )] = None,
+    starts: Annotated[int | None, typer.Option(
+        "--starts", help="--closed-loop: starts of the multiple-shooting search (8).")] = None,
     free: Annotated[list[str] | None, typer.Option(
         "--free", help="--closed-loop: free a parameter with bounds, NAME=LO,HI in SI (e.g. "
                        "Fs=0,0.2); repeatable; added to the default set kL, alpha, Fc, sigma2 "
@@ -149,12 +153,14 @@ def identify_cmd(
         from ema_cli.cli.identify_logs import run_log_mode
 
         torque_only = {"--k-range": k_range, "--alpha-range": alpha_range, "--c-range": c_range,
-                       "--method": method, "--runs": runs, "--n-jobs": n_jobs,
+                       "--method": method if not closed_loop else None, "--runs": runs,
+                       "--n-jobs": n_jobs,
                        "--damping": damping, "--model": model, "--c": c,
                        "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits}
         run_log_mode(modes, config=config, data=data, noise=noise, seed=seed, pop=pop,
                      generations=generations, set_=set_, out=out, free=free,
                      make_data=make_data, columns=columns, window=window,
+                     method=method if closed_loop else None, starts=starts,
                      torque_only=[k for k, v in torque_only.items() if v is not None])
         return
     if window is not None:

@@ -96,6 +96,7 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                  noise: float | None, seed: int | None, pop: int | None,
                  generations: int | None, set_: list[str] | None, out: Path | None,
                  free: list[str] | None, make_data: str | None,
+                 method: str | None = None, starts: int | None = None,
                  torque_only: list[str], columns: list[str] | None = None,
                  window: str | None = None) -> None:
     """Check the options of a log mode (one mode; no torque-data options) and run it."""
@@ -120,6 +121,8 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
         raise EmaError(f"--noise describes synthetic data (--make-data), not {mode}")
     if mode != "--closed-loop" and (pop is not None or generations is not None):
         raise EmaError(f"--pop and --generations set the GA of --closed-loop, not {mode}")
+    if mode != "--closed-loop" and starts is not None:
+        raise EmaError(f"--starts sets the search of --closed-loop, not {mode}")
     check_number(noise, "--noise", low=0.0)
     check_output(out, "identify")
     pairs: list[tuple[str, Any]] = list(parse_assignments(set_, "--set"))
@@ -142,6 +145,22 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
     elif seed is not None:
         raise EmaError("--seed has no use with --friction-sweep (the fit is deterministic)")
     if mode == "--closed-loop":
+        if method is not None and method not in ("shooting", "ga"):
+            raise EmaError(f"--method: --closed-loop searches by shooting or ga, got {method!r}")
+        if method is None and (pop is not None or generations is not None):
+            method = "ga"  # the GA's options keep their meaning: they select the GA
+            err_console.print("note: --pop/--generations select the GA search (--method ga); "
+                              "the default is multiple shooting (--starts)")
+        if method == "ga" and starts is not None:
+            raise EmaError("--starts sets the multiple-shooting search, not --method ga")
+        if method == "shooting" and (pop is not None or generations is not None):
+            raise EmaError("--pop and --generations set the GA, not --method shooting "
+                           "(use --starts)")
+        if method is not None:
+            pairs.append(("search", method))
+        if starts is not None:
+            check_number(starts, "--starts", low=2)
+            pairs.append(("shooting.starts", starts))
         if pop is not None:
             pairs.append(("ga.pop", pop))
         if generations is not None:

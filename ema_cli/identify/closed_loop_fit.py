@@ -317,7 +317,7 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
     if log is None:
         if settings.data is None:
             raise EmaError("--closed-loop needs --data LOG.csv (or data: in the config)")
-        log = load_log(settings.data)
+        log = load_log(settings.data, columns=settings.columns, window=settings.window)
     problem, notes = build_problem(settings, log)
     timings: dict[str, float] = {}
     warnings: list[str] = []

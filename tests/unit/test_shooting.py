@@ -1,0 +1,138 @@
+"""Multiple shooting (identify.shooting, shooting_search, shooting_fit): the kernel's initial
+state, the segment machinery against the whole-log simulation, the cluster-robust covariance,
+and a short fit of a log (accuracy, coverage, the verdict on the optimum)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ema_cli.identify.closed_loop import CHANNELS, ClosedLoopLog
+from ema_cli.identify.closed_loop_fit import build_problem, run_closed_loop
+from ema_cli.identify.log_settings import ClosedLoopSettings
+from ema_cli.identify.synthetic_logs import closed_loop_log
+from ema_cli.identify.uncertainty import covariance, covariance_clustered
+from ema_cli.model.params import INDEX, INITIAL_STATE, resolve, to_row
+from ema_cli.units import DEG
+
+DT = 1e-5
+
+
+def _csv(t: np.ndarray, y: np.ndarray):
+    from ema_cli.sim.signals import InputSignal
+
+    return InputSignal("csv", table=(tuple(t.tolist()), tuple(y.tolist())), path="test")
+
+
+def test_a_run_from_a_recorded_state_continues_the_run_it_came_from():
+    """Initial-state parameters x0_*: a run from rest for 0.2 s, then a second run from the
+    state recorded at 0.1 s (xI recovered from the recorded voltage demand, the controller
+    being linear there), following the same command shifted: the second run equals the first
+    one's last 0.1 s to rounding (1e-9 of each signal's range)."""
+    from ema_cli.sim.runner import simulate_batch
+    from ema_cli.sim.tables import SIG
+
+    prm = resolve({"alpha": 0.002, "friction": 1.0, "sigma2": 0.01})
+    t = np.arange(0.0, 0.2 + 1e-12, 1e-4)
+    ref = 2.0 * DEG * np.sin(2 * np.pi * 5.0 * t)
+    n1 = 20_000
+    a = simulate_batch(np.array([to_row(prm)]), [_csv(t, ref)], None, DT, n1, 10)
+    s = a.signals[0]
+    k = 1000  # record index of t = 0.1 s
+    e_w = prm["m"] * prm["Kpp"] * (ref[k] - s[k, SIG["theta_load"]]) - s[k, SIG["omega_motor"]]
+    x_i = (s[k, SIG["voltage_cmd"]] - prm["Kps"] * e_w) / prm["Kis"]
+    x0 = [s[k, SIG["theta_motor"]] * prm["m"], s[k, SIG["omega_motor"]], s[k, SIG["current"]],
+          s[k, SIG["theta_load"]], s[k, SIG["omega_load"]], s[k, SIG["bristle_z"]], x_i]
+    row = np.array(to_row(prm))
+    for name, v in zip(INITIAL_STATE, x0, strict=True):
+        row[INDEX[name]] = v
+    b = simulate_batch(row[None], [_csv(t[k:] - t[k], ref[k:])], None, DT, n1 // 2, 10)
+    for name in ("theta_load", "omega_motor", "current", "voltage_cmd", "bristle_z"):
+        j = SIG[name]
+        whole, part = s[k:, j], b.signals[0, :, j]
+        assert np.max(np.abs(whole - part)) <= 1e-9 * np.ptp(whole), name
+
+
+def test_cluster_robust_covariance_is_the_ordinary_one_for_white_residuals():
+    """Independent residuals: the cluster-robust covariance agrees with s^2 (J^T J)^-1 within
+    the sampling error of 200 clusters (~10 %); residuals correlated inside a cluster (a
+    common offset per cluster): the ordinary one understates the variance, the robust one
+    does not."""
+    rng = np.random.default_rng(7)
+    N, p, G = 20_000, 2, 200
+    J = rng.normal(size=(N, p))
+    r = rng.normal(size=N)
+    clusters = np.array_split(np.arange(N), G)
+    ordinary, *_ = covariance(J, r)
+    robust, _, dof = covariance_clustered(J, r, clusters)
+    assert dof == G - 1
+    assert np.allclose(np.diag(robust) / np.diag(ordinary), 1.0, atol=0.25)
+    # a smooth regressor and a shared error per cluster: correlated inside clusters
+    Js = np.repeat(rng.normal(size=(G, p)), N // G, axis=0)
+    rc = np.repeat(rng.normal(size=G), N // G) + 0.1 * rng.normal(size=N)
+    ordinary, *_ = covariance(Js, rc)
+    robust, *_ = covariance_clustered(Js, rc, clusters)
+    assert np.all(np.diag(robust) > 20 * np.diag(ordinary))
+
+
+def _log(syn) -> ClosedLoopLog:
+    c = syn.columns
+    return ClosedLoopLog(c["t_s"], c["theta_ref_deg"] * DEG,
+                         {k: c[k] * CHANNELS[k][1] for k in CHANNELS}, "synthetic", 0.0,
+                         syn.truth)
+
+
+def test_segments_at_the_truth_fit_to_the_noise_level():
+    """At the true parameters, the segment states reconstructed from the data and fitted
+    segment by segment reach the noise level (J/N within 10 % of 1) on a noisy log, and the
+    segments are joined: each one's simulated end state is the next one's start within a
+    few state scales."""
+    from ema_cli.identify import shooting_search as ss
+
+    syn = closed_loop_log({"kL": 450.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 1.0, 1,
+                          duration_s=1.0)
+    problem, _ = build_problem(ClosedLoopSettings(), _log(syn))
+    x = np.array([syn.truth[n] for n in problem.names])
+    sp = ss.build(problem, 0.2, x)
+    V = ss.start_states(sp, x[None], 5e-5)
+    R, ends = sp.residuals_many(V, 5e-5)
+    N = problem.measured.size
+    assert 0.85 < float(R[0] @ R[0]) / N < 1.1
+    _, S = sp.unpack(V[0])
+    defect = (ends[0, :-1, 3] - S[1:, 3]) / sp.sigma[3]  # load angle, in state scales
+    assert np.max(np.abs(defect)) < 5.0, defect
+
+
+@pytest.fixture(scope="module")
+def short_fit():
+    syn = closed_loop_log({"kL": 420.0, "alpha": 0.0055, "Fc": 0.05, "sigma2": 0.02}, 1.0, 3,
+                          duration_s=1.0)
+    settings = ClosedLoopSettings(shooting={"starts": 4}, profile_points=5)
+    return syn, run_closed_loop(settings, _log(syn))
+
+
+def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
+    """A 1 s log (1 % noise, truths far from the defaults) from the default bounds with 4
+    starts: kL, alpha within 0.5 %, Fc, sigma2 within 2 %, every truth inside its 95 %
+    interval, the optimum confirmed."""
+    syn, fit = short_fit
+    js = fit.to_json()
+    e = js["error_pct_vs_truth"]
+    assert abs(e["kL"]) < 0.5 and abs(e["alpha"]) < 0.5, e
+    assert abs(e["Fc"]) < 2 and abs(e["sigma2"]) < 2, e
+    assert js["optimum"]["confirmed"] is True, js["optimum"]
+    assert all(js["truth_in_ci95"].values()), (js["truth_in_ci95"], js["parameters"])
+    assert js["not_determined"] == []
+    assert js["shooting"]["segments"] == 5
+
+
+def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
+    """The load inertia fixed 30 % high: the segments cannot reach the noise level, so the
+    optimum is not confirmed and no parameter is reported as determined."""
+    syn = closed_loop_log({}, 1.0, 0, duration_s=1.0)
+    settings = ClosedLoopSettings(plant={"JL": 0.013}, shooting={"starts": 2, "max_iter": 10},
+                                  polish=False, profile_points=5)
+    js = run_closed_loop(settings, _log(syn)).to_json()
+    assert js["optimum"]["confirmed"] is False
+    assert any("noise level" in r for r in js["optimum"]["not_confirmed_because"])
+    assert set(js["not_determined"]) == {"kL", "alpha", "Fc", "sigma2"}
