@@ -36,7 +36,7 @@ MAX_CL_POP = 4096  # the largest closed-loop population [individuals]
 MAX_CL_GENERATIONS = 10_000  # the most closed-loop generations
 MAX_NOISE_PCT = 100.0  # the largest noise of synthetic data [% of the RMS]
 DEFAULT_STARTS = 8  # multiple shooting: Sobol starts over the bounds
-DEFAULT_SEGMENT_S = 0.2  # multiple shooting: segment length [s]
+DEFAULT_SEGMENT_S = 0.05  # multiple shooting: segment length [s] (docs/identification.md)
 DEFAULT_MS_ITER = 60  # multiple shooting: most joint LM iterations of a start
 MAX_STARTS = 256  # the most multiple-shooting starts
 

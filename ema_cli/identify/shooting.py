@@ -53,7 +53,9 @@ STATE_FD_REL = 1e-3  # finite-difference step of a state, in state scales [-]
 PARAM_FD_REL = 1e-4  # finite-difference step of a parameter, relative (see fd steps) [-]
 STATE_SCALE_FRACTION = 1e-2  # a state's scale: this fraction of its RMS over the log [-]
 FAILED = 1e6  # residual of a diverged or non-finite simulation [-]
-_SIG_OF_STATE = ("theta_motor", "omega_motor", "current", "theta_load", "omega_load")
+_SIG_OF_STATE = ("theta_motor", "omega_motor", "current", "theta_load", "omega_load",
+                 "voltage_cmd", "theta_ref")
+"""The recorded signals of the end states (theta_motor is theta_m/m); the last two give xI."""
 """The recorded signal of each continuity state (theta_motor is theta_m/m)."""
 
 
@@ -198,6 +200,16 @@ class ShootingProblem:
         ends = np.array(ends, dtype=np.float64)
         # the motor angle as its position in the gap (theta_motor is theta_m/m)
         ends[:, 0] = (ends[:, 0] - ends[:, 3]) / (rows[:, INDEX["alpha"]] + GAP_FLOOR)
+        # the speed-PI integral from the controller's law, u = Kps*e_w + Kis*xI (exact while
+        # SAT2 is inactive and the sensors are ideal; a starting guess otherwise)
+        col = {k: rows[:, INDEX[k]] for k in ("Kpp", "Kps", "Kis", "m", "sat1")}
+        w_ref = col["m"] * np.clip(col["Kpp"] * (ends[:, 6] - ends[:, 3]), -col["sat1"],
+                                   col["sat1"])
+        e_w = w_ref - ends[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ends[:, 5] = np.where(col["Kis"] > 0, (ends[:, 5] - col["Kps"] * e_w) / col["Kis"],
+                                  0.0)
+        ends = ends[:, :6]
         return Y, ends, res.diverged
 
     # ---- residuals and Jacobian ----------------------------------------------------------

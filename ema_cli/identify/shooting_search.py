@@ -284,6 +284,10 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
             break
         if reseat_every and it % reseat_every == 0:
             reseat(sp, st, dt, act)
+            V2, R2, c2 = chain_seat(sp, st.V[act], dt)
+            moved = c2 < st.cost[act]
+            st.V[act[moved]], st.R[act[moved]], st.cost[act[moved]] = (V2[moved], R2[moved],
+                                                                      c2[moved])
         R0, Jx, Js = sp.jacobian_many(st.V[act], dt)
         AG = [sp.normal_equations(R0[q], Jx[q], Js[q]) for q in range(act.size)]
         A = np.array([a for a, _ in AG])
@@ -322,6 +326,8 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
             fresh = stuck[~st.reseated[stuck]]
             before = st.cost[fresh].copy()
             reseat(sp, st, dt, fresh, ratio=0.0)
+            if fresh.size:
+                st.V[fresh], st.R[fresh], st.cost[fresh] = chain_seat(sp, st.V[fresh], dt)
             st.reseated[fresh] = True
             for i, c in zip(fresh, before, strict=True):
                 if st.cost[i] < c * (1.0 - 1e-6):
@@ -350,7 +356,65 @@ def start_states(sp: ShootingProblem, X: np.ndarray, dt: float, iterations: int 
             starts.append(S0)
             group.append(g)
     S, _ = fit_states(sp, np.array(Xi), np.array(starts), np.array(group), dt, iterations)
-    return np.array([sp.pack(x, S[g]) for g, x in enumerate(X)])
+    V = np.array([sp.pack(x, S[g]) for g, x in enumerate(X)])
+    return chain_seat(sp, V, dt)[0]
+
+
+CHAIN_SWEEPS = 8  # most sweeps of :func:`chain_seat`
+
+
+def chain_seat(sp: ShootingProblem, V: np.ndarray, dt: float, sweeps: int = CHAIN_SWEEPS
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Seat each segment at the end of the previous one where that fits its data better:
+    candidates ``V[m, n_vars]`` (scaled) -> (V, residuals R[m, nd], data costs [m]).
+
+    A segment whose own state fit fell into a wrong local minimum (e.g. the wrong side of the
+    gap while the load coasts) is re-started from the state its predecessor's simulation
+    reaches; one kernel call per sweep for every candidate and segment, repeated while any
+    segment improves, so a good start propagates along the log."""
+    V = V.copy()
+    R, ends = sp.residuals_many(V, dt)
+    c = seg_costs(sp, R)
+    # the first segment from rest (a log that starts with the actuator at rest, as a test
+    # log does): every state 0, the load angle 0 or its measured value
+    th0, _ = _local_fit(sp.base.log.t, sp.base.log.channels["theta_load_deg"], np.array([0]))
+    for th in {0.0, float(th0[0])}:
+        W = V.copy()
+        for i in range(V.shape[0]):
+            x, S = sp.unpack(V[i])
+            S[0] = 0.0
+            S[0, 3] = th
+            W[i] = sp.pack(x, S)
+        R2, ends2 = sp.residuals_many(W, dt)
+        c2 = seg_costs(sp, R2)
+        for i in np.flatnonzero(c2[:, 0] < c[:, 0]):
+            x, S = sp.unpack(V[i])
+            S[0] = sp.unpack(W[i])[1][0]
+            V[i] = sp.pack(x, S)
+    R, ends = sp.residuals_many(V, dt)
+    c = seg_costs(sp, R)
+    for _ in range(sweeps):
+        W = V.copy()
+        for i in range(V.shape[0]):
+            x, S = sp.unpack(V[i])
+            S2 = S.copy()
+            S2[1:] = ends[i, :-1]  # q, w_m, i, theta_L, w_L, xI (VAR_STATES order)
+            W[i] = sp.pack(x, S2)
+        R2, ends2 = sp.residuals_many(W, dt)
+        c2 = seg_costs(sp, R2)
+        better = c2 < c * (1.0 - 1e-9)
+        better[:, 0] = False
+        if not np.any(better):
+            break
+        for i in range(V.shape[0]):
+            if np.any(better[i]):
+                x, S = sp.unpack(V[i])
+                _, S2 = sp.unpack(W[i])
+                S[better[i]] = S2[better[i]]
+                V[i] = sp.pack(x, S)
+        R, ends = sp.residuals_many(V, dt)
+        c = seg_costs(sp, R)
+    return V, R, np.sum(R**2, axis=1)
 
 
 def new_state(sp: ShootingProblem, V: np.ndarray, dt: float) -> LMState:

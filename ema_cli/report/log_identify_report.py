@@ -132,13 +132,14 @@ def _search_text(fit: ClosedLoopFit) -> str:
     verdict = ("**Optimum confirmed**" if ms.confirmed else
                "**Optimum NOT confirmed**: " + "; ".join(ms.reasons))
     pol = ms.polish
-    kept = ("kept" if pol.get("kept") else "not kept: " + "; ".join(
-        pol.get("why_not", [pol.get("why", "")])))
+    kept = ("not run" if not pol.get("x") else "its optimum agrees with the estimate" if
+            pol.get("agrees") else "differs: " + "; ".join(pol.get("why_not", [])))
     return (f"Search: multiple shooting, {s.sp.seg.n} segments of the log, {len(s.starts_x)} "
             f"Sobol starts, joint Levenberg-Marquardt with successive halving; the "
             f"{len(s.final_cost)} finishing starts end at J = "
             + ", ".join(f"{c:.6g}" for c in s.final_cost) + f" ({s.agree} agree). "
-            f"Whole-log polish: {kept}. Estimate from the {ms.source}.\n\n{verdict}.")
+            f"Whole-log polish from rest (a check): {kept}. Estimate from the {ms.source}."
+            f"\n\n{verdict}.")
 
 
 def closed_loop_summary(fit: ClosedLoopFit) -> str:

@@ -123,7 +123,7 @@ def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
     assert js["optimum"]["confirmed"] is True, js["optimum"]
     assert all(js["truth_in_ci95"].values()), (js["truth_in_ci95"], js["parameters"])
     assert js["not_determined"] == []
-    assert js["shooting"]["segments"] == 5
+    assert js["shooting"]["segments"] == 20  # 0.05 s each
 
 
 def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
