@@ -237,12 +237,12 @@ def simulate(p: Mapping[str, float], law: str, command: Callable[[float], float]
         st.njev += sol.njev
         st.nlu += sol.nlu
         if sol.status == -1:
-            raise RuntimeError(f"solve_ivp failed at t = {sol.t[-1] if sol.t.size else t0:.6g} "
-                               f"s ({law}): {sol.message}")
-        if sol.t.size:
-            rec_t.append(sol.t)
-            rec_x.append(sol.y.T)
-            k += sol.t.size
+            raise RuntimeError(f"solve_ivp failed after t = {t0:.6g} s ({law}): {sol.message}")
+        seg_t = np.asarray(sol.t, dtype=float)  # solve_ivp gives [] when no sample fell in
+        if seg_t.size:
+            rec_t.append(seg_t)
+            rec_x.append(np.asarray(sol.y, dtype=float).T)
+            k += seg_t.size
         if sol.status == 0:
             if ilim:
                 st.time_in_ilim_s += t_end - t0

@@ -70,7 +70,7 @@ def convergence(truth: Mapping[str, float], law: str, excitation: str, duration_
 
 
 def ema_run(truth: Mapping[str, float], law: str, cmd, duration_s: float,
-            rate_hz: float = 1000.0) -> dict[str, np.ndarray]:
+            rate_hz: float = 1000.0, dt: float = EMA_DT) -> dict[str, np.ndarray]:
     """ema's kernel (``ema_cli.sim.runner.simulate``, friction on, contact_tau of the law) on
     the command sampled every REF_DT as a ``csv`` reference -> channels at rate_hz."""
     from ema_cli.model.params import resolve as ema_resolve
@@ -81,17 +81,15 @@ def ema_run(truth: Mapping[str, float], law: str, cmd, duration_s: float,
     ref = InputSignal("csv", table=(tuple(tf.tolist()), tuple(cmd.sample(tf).tolist())),
                       path="(loggen command)")
     pe = ema_resolve({**truth, "friction": 1.0, "contact_tau": LAW_TAU[law]})
-    res = simulate(pe, ref, duration=duration_s, dt=EMA_DT, output_interval=1.0 / rate_hz)
+    res = simulate(pe, ref, duration=duration_s, dt=dt, output_interval=1.0 / rate_hz)
     return {c: np.asarray(res.signal(c, edge=True)) for c in CHANNELS}
 
 
-def crosscheck(truth: Mapping[str, float], law: str, excitation: str, duration_s: float,
-               window_s: float = 1.0) -> dict[str, list[float]]:
-    """Per channel: max |generator - ema| / RMS(ema) in each window of ``window_s``."""
-    t, a, cmd = run(truth, law, excitation, duration_s)
-    b = ema_run(truth, law, cmd, duration_s)
+def window_errors(t: np.ndarray, a: Mapping[str, np.ndarray], b: Mapping[str, np.ndarray],
+                  window_s: float) -> dict[str, list[float]]:
+    """Per channel: max |a - b| / RMS(b) in each window of ``window_s`` from 0."""
     out: dict[str, list[float]] = {}
-    edges = np.arange(0.0, duration_s + 1e-9, window_s)
+    edges = np.arange(0.0, t[-1] + 1e-9, window_s)
     for c in CHANNELS:
         rms = float(np.sqrt(np.mean(b[c] ** 2)))
         d = np.abs(a[c] - b[c])
@@ -100,11 +98,30 @@ def crosscheck(truth: Mapping[str, float], law: str, excitation: str, duration_s
     return out
 
 
+def crosscheck(truth: Mapping[str, float], law: str, excitation: str, duration_s: float,
+               window_s: float = 1.0) -> dict[str, list[float]]:
+    """Per channel: max |generator - ema| / RMS(ema) in each window of ``window_s``."""
+    t, a, cmd = run(truth, law, excitation, duration_s)
+    return window_errors(t, a, ema_run(truth, law, cmd, duration_s), window_s)
+
+
+def ema_step_study(truth: Mapping[str, float], law: str, excitation: str, duration_s: float,
+                   dts: tuple[float, ...] = (1e-5, 5e-6, 2.5e-6)) -> dict[float, list[float]]:
+    """Whose error is a disagreement? theta_load: max |generator - ema(dt)| / RMS per 1 s
+    window for each of ema's steps ``dts``: it falls with dt when ema's discretisation is the
+    cause (the jump law's torque jump lands on ema's step grid)."""
+    t, a, cmd = run(truth, law, excitation, duration_s)
+    return {dt: window_errors(t, a, ema_run(truth, law, cmd, duration_s, dt=dt), 1.0)[
+        "theta_load_deg"] for dt in dts}
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description="verify the independent log generator")
     ap.add_argument("--duration", type=float, default=4.0, help="log length [s]")
     ap.add_argument("--skip-convergence", action="store_true")
     ap.add_argument("--skip-crosscheck", action="store_true")
+    ap.add_argument("--step-study", nargs="*", default=[], metavar="CASE:LAW",
+                    help="ema's step refined against the generator, e.g. large_alpha:jump")
     a = ap.parse_args(argv)
     if not a.skip_convergence:
         print(f"convergence: rtol {odemodel.RTOL:g} vs 1e-11, max |diff| / (1 % of RMS), "
@@ -123,6 +140,15 @@ def main(argv: list[str] | None = None) -> None:
                 for c, v in r.items():
                     print(f"  {name:11s} {exc:9s} {law:5s} {c:16s} "
                           + " ".join(f"{x:.2e}" for x in v), flush=True)
+
+
+    cases = {name: (truth, exc) for name, truth, exc in CASES}
+    for item in a.step_study:
+        name, law = item.split(":")
+        r = ema_step_study(cases[name][0], law, cases[name][1], a.duration)
+        for dt, v in r.items():
+            print(f"  step study {name} {law} ema dt {dt:g} s: theta_load "
+                  + " ".join(f"{x:.2e}" for x in v), flush=True)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ from experiments.loggen.battery import plan
 from experiments.loggen.excitations import Chirp, Multisine, Steps, make_command
 from experiments.loggen.logs import make_log, sidecar_path, write_log
 from experiments.loggen.params import resolve
-from experiments.loggen.verify import CASES, CHANNELS, convergence, crosscheck
+from experiments.loggen.verify import CASES, CHANNELS, convergence, crosscheck, ema_step_study
 
 CASE = {name: (truth, exc) for name, truth, exc in CASES}
 
@@ -70,17 +70,31 @@ def test_current_limit_is_reached_and_held() -> None:
     assert np.max(np.abs(tr.state("i"))) <= 0.5 + 1e-12
 
 
+# Whole 4 s logs (slow tier). Measured theta_load max |diff| / RMS, first second and worst of
+# 1-4 s: ramp 7e-6 .. 4.5e-5 and up to 3.2e-2 (small_alpha multisine, 2-3 s); jump 2.8e-4 ..
+# 1.3e-2 and up to 0.14 (large_alpha). Later in a log the impacts drift apart in time (the
+# load flies free in the gap, so a timing difference grows), and the drift is ema's step: it
+# falls as ema's dt is refined (test below).
+FIRST_S_TOL = {"ramp": 2e-4, "jump": 5e-2}
+LATER_TOL = {"ramp": 0.1, "jump": 0.4}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("case", "law"), [(c, law) for c, *_ in CASES for law in ("jump", "ramp")])
 def test_agrees_with_ema_over_4_s(case: str, law: str) -> None:
-    """Whole 4 s logs: close over the first second (theta_load within 1e-3 of its RMS for
-    the ramp, 3e-3 for the jump); later, impacts in the gap may drift apart in time, so over
-    1-4 s only within 10 % (see the verify tables for the measured values)."""
     truth, exc = CASE[case]
-    r = crosscheck(truth, law, exc, 4.0)
-    th = r["theta_load_deg"]
-    assert th[0] < (1e-3 if law == "ramp" else 3e-3), r
-    assert max(th[1:]) < 0.1, r
+    th = crosscheck(truth, law, exc, 4.0)["theta_load_deg"]
+    assert th[0] < FIRST_S_TOL[law], th
+    assert max(th[1:]) < LATER_TOL[law], th
+
+
+@pytest.mark.slow
+def test_disagreement_is_emas_step() -> None:
+    """large_alpha, jump law, 4 s: the worst 1 s window of |generator - ema| / RMS falls from
+    0.142 at ema's dt = 1e-5 s to 0.011 at 2.5e-6 s (measured; asserted: at least 4x)."""
+    truth, exc = CASE["large_alpha"]
+    r = ema_step_study(truth, "jump", exc, 4.0, dts=(1e-5, 2.5e-6))
+    assert max(r[2.5e-6]) < max(r[1e-5]) / 4, r
 
 
 # -- the contact laws by hand -------------------------------------------------------------------
@@ -111,6 +125,17 @@ def test_contact_laws_by_hand() -> None:
     for law in odemodel.LAWS:
         assert odemodel.Plant(p0, law, lambda t: 0.0).torque(1e-3, -0.2, 0) == pytest.approx(
             p0["kL"] * 1e-3 - p0["c"] * 0.2)
+
+
+def test_sampling_does_not_change_the_trajectory() -> None:
+    """Samples every 50 ms (several contact events between two samples: segments without a
+    sample) equal every 50th sample of a 1 ms log to 1e-12 (the samples come from the
+    solver's dense output; measured 2e-14)."""
+    p = resolve({"alpha": 0.003, "sigma2": 1e-4})
+    sparse = odemodel.simulate(p, "jump", Chirp().value, np.arange(7) * 0.05)
+    dense = odemodel.simulate(p, "jump", Chirp().value, np.arange(301) * 1e-3)
+    assert sparse.stats.segments > 7
+    assert np.max(np.abs(sparse.x - dense.x[::50]) / odemodel.STATE_SCALE) < 1e-12
 
 
 def test_derived_parameters_follow_ema_rules() -> None:
