@@ -6,11 +6,12 @@ at Latin-hypercube truths, three contact laws, three excitations, two sample rat
         [--only 0,3,7] [--starts 8]
 
 Sets: ``stated`` = one log per truth with its contact law stated to the fit (even truths the
-ramp law with its contact_tau, odd truths the jump law, contact_tau = 0); ``unstated`` = the
-Hunt-Crossley logs (a law ema does not have) fitted with the defaults. Every fit runs in this
-process, one after the other (numba threads use the cores); results are appended to
-``results.csv`` as each fit ends (an interrupted run resumes), then ``summary.md`` tallies them
-against the issue's tolerances.
+ramp law with its contact_tau, odd truths the jump law, contact_tau = 0; the damping ratio
+zeta_t of the data); ``unstated`` = the Hunt-Crossley logs (a law ema does not have) fitted
+with the defaults (the contact's zeta_t and contact_tau then free nuisance parameters). Every
+fit runs in this process, one after the other (numba threads use the cores); results are
+appended to ``results.csv`` as each fit ends (an interrupted run resumes), then ``summary.md``
+tallies them against the issue's tolerances.
 """
 
 from __future__ import annotations
@@ -38,7 +39,9 @@ def plan(manifest: dict, which: str) -> list[tuple[str, str, dict]]:
             e = by.get((i, law))
             if e is not None:
                 tau = e["truth_full"].get("contact_tau", 1e-4 if law == "ramp" else 0.0)
-                out.append((e["file"], "stated", {"contact_tau": float(tau)}))
+                out.append((e["file"], "stated", {
+                    "contact_tau": float(tau),
+                    "zeta_t": float(e["truth_full"].get("zeta_t", 0.2))}))
         if which in ("unstated", "all"):
             e = by.get((i, "hunt_crossley"))
             if e is not None:
@@ -57,12 +60,15 @@ def fit_one(path: Path, plant: dict, starts: int) -> dict:
     fit = run_closed_loop(settings, log)
     wall = time.perf_counter() - t0
     js = fit.to_json()
-    row: dict = {"wall_s": wall, "confirmed": js["optimum"]["confirmed"],
+    extra = {f"{n}_est": float(fit.x[j]) for j, n in enumerate(fit.names) if n not in NAMES}
+    row: dict = {"wall_s": wall, "confirmed": js["optimum"]["confirmed"], **extra,
                  "J_over_N": fit.shooting.search.cost / fit.problem.measured.size,
                  "agree": fit.shooting.search.agree,
                  "max_ratio": max(js["fit_quality"]["rms_over_scale"].values()),
                  "reasons": " | ".join(js["optimum"]["not_confirmed_because"])}
     for j, n in enumerate(fit.names):
+        if n not in NAMES:
+            continue
         t = log.truth[n]
         lo, hi = js["parameters"][n]["ci95"]
         row[f"{n}_est"] = float(fit.x[j])

@@ -42,13 +42,18 @@ CHANNELS: dict[str, tuple[str, float, str]] = {
     "voltage_cmd_v": ("voltage_cmd", 1.0, "V"),
 }
 """Measured channel (log column) -> (simulator signal, edge -> SI factor, edge unit)."""
-FREE_NAMES = ("kL", "alpha", "zeta_t", "c", "Fc", "Fs", "vs", "sigma2", "sigma0", "Jm", "JL",
-              "bL")
+FREE_NAMES = ("kL", "alpha", "zeta_t", "c", "contact_tau", "Fc", "Fs", "vs", "sigma2", "sigma0",
+              "Jm", "JL", "bL")
 """Parameters a closed-loop fit may free (names of ``ema params``)."""
 FRICTION_NAMES = ("Fc", "Fs", "vs", "sigma2", "sigma0")
 DEFAULT_FREE: dict[str, tuple[float, float]] = {
     "kL": (300.0, 900.0), "alpha": (0.0, 0.01), "Fc": (0.0, 0.1), "sigma2": (0.0, 0.1)}
 """The free set without a config: bounds in SI (N*m/rad, rad, N*m, N*m*s/rad)."""
+NUISANCE: dict[str, tuple[float, float]] = {"zeta_t": (0.02, 1.0), "contact_tau": (0.0, 1e-3)}
+"""The contact's parameters freed by a multiple-shooting fit unless stated (settings
+``free_contact``): SI bounds (-, s). Reported, but neither the verdict's bound rule nor its
+"not determined" applies to them: a contact on a physical bound (tau = 0: the jump law) is an
+answer, and the primary parameters' intervals already carry their correlation with them."""
 MIN_LOG_ROWS = 50  # fewest samples accepted in a log [rows]
 MIN_LOG_DURATION_S = 0.05  # shortest log accepted [s]
 MIN_POSITIVE = {"Fc": 1e-9, "vs": 1e-9, "Jm": 1e-12, "JL": 1e-12}

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -34,6 +34,7 @@ from ema_cli.errors import EmaError
 from ema_cli.identify.closed_loop import (
     CHANNELS,
     NOISE_NOTE,
+    NUISANCE,
     ClosedLoopLog,
     ClosedLoopProblem,
     channel_scale,
@@ -41,16 +42,13 @@ from ema_cli.identify.closed_loop import (
     load_log,
 )
 from ema_cli.identify.log_settings import ClosedLoopSettings
+from ema_cli.identify.shooting_fit import ShootingOutcome, shooting_estimate, too_high
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
+from ema_cli.identify.whole_log import FD_REL_STEP, fd_jacobian, polish
 from ema_cli.model.params import BY_NAME
 from ema_cli.optim.ga import GAHistory, preset, run_ga
 from ema_cli.progress import report
 
-if TYPE_CHECKING:
-    from ema_cli.identify.shooting_fit import ShootingOutcome
-
-FD_REL_STEP = 1e-4  # central-difference step, relative to max(|x|, 1e-3*(hi - lo)) [-]
-POLISH_TOL = 1e-10  # xtol/ftol/gtol of the least-squares polish [-]
 RESTART_MARGIN = 1e-3  # restart the polish when the slice is 0.1 % lower than its optimum [-]
 QUADRATIC_RATIO = 3.0  # the cost 1 SE away must rise 1/3 .. 3 x what J^T J predicts [-]
 HORIZON_GROWTH = 2.0  # continuation: each polish stage fits this many times the last horizon
@@ -215,7 +213,13 @@ class ClosedLoopFit:
 def build_problem(settings: ClosedLoopSettings, log: ClosedLoopLog) -> tuple[
         ClosedLoopProblem, dict[str, str]]:
     """The problem of ``log`` with the settings' free set, fixed plant, channels and scales."""
-    names, lo, hi = check_free(settings.free, settings.plant)
+    free = dict(settings.free)
+    if settings.search == "shooting" and settings.free_contact:
+        stated = set(settings.plant) | set(free)
+        for n, b in NUISANCE.items():
+            if n not in stated and not (n == "zeta_t" and "c" in stated):
+                free[n] = b
+    names, lo, hi = check_free(free, settings.plant)
     chosen = settings.channels or {c: "auto" for c in log.channels}
     notes = {}
     scales = []
@@ -236,53 +240,6 @@ def build_problem(settings: ClosedLoopSettings, log: ClosedLoopLog) -> tuple[
     except EmaError as exc:
         raise EmaError(f"plant: {exc.message}") from None
     return problem, notes
-
-
-def fd_jacobian(problem: ClosedLoopProblem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Central-difference Jacobian of the weighted residuals at ``x`` -> (r(x), J[N, p]); the
-    base point and the 2p perturbed sets run in one kernel call (one-sided at a bound)."""
-    p = x.shape[0]
-    h = FD_REL_STEP * np.maximum(np.abs(x), 1e-3 * (problem.upper - problem.lower))
-    up = np.minimum(x + h, problem.upper)
-    dn = np.maximum(x - h, problem.lower)
-    X = np.repeat(x[None], 2 * p + 1, axis=0)
-    for j in range(p):
-        X[1 + j, j] = up[j]
-        X[1 + p + j, j] = dn[j]
-    R = problem.weighted_residuals(X)
-    J = (R[1:1 + p] - R[1 + p:]).T / (up - dn)[None, :]
-    return R[0], J
-
-
-def polish(problem: ClosedLoopProblem, x0: np.ndarray, max_iter: int) -> tuple[Any, int]:
-    """Bounded TRF least squares from ``x0`` in bound-scaled variables -> (scipy result, jacs)."""
-    from scipy.optimize import least_squares
-
-    lo, hi = problem.lower, problem.upper
-    span = hi - lo
-    cache: dict[bytes, np.ndarray] = {}
-    njev = 0
-
-    def fun(u: np.ndarray) -> np.ndarray:
-        x = lo + u * span
-        key = x.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = problem.weighted_residuals(x[None])[0]
-        return cache[key]
-
-    def jac(u: np.ndarray) -> np.ndarray:
-        nonlocal njev
-        njev += 1
-        _, J = fd_jacobian(problem, lo + u * span)
-        return J * span[None, :]
-
-    u0 = np.clip((x0 - lo) / span, 0.0, 1.0)
-    res = least_squares(fun, u0, jac=jac, bounds=(0.0, 1.0), method="trf", x_scale=1.0,
-                        xtol=POLISH_TOL, ftol=POLISH_TOL, gtol=POLISH_TOL,
-                        max_nfev=max_iter)
-    res.x = lo + res.x * span
-    return res, njev
 
 
 def alpha_scan(problem: ClosedLoopProblem, x: np.ndarray, r: np.ndarray, J: np.ndarray,
@@ -327,7 +284,6 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
 
     ms = None
     if settings.search == "shooting":
-        from ema_cli.identify.shooting_fit import shooting_estimate, too_high
 
         t0 = time.perf_counter()
         sh = settings.shooting
@@ -335,6 +291,8 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
                                dt_search=problem.ga_dt, seed=settings.seed,
                                max_iter=sh.max_iter,
                                polish_iter=settings.max_iter if settings.polish else 0,
+                               nuisance=tuple(n for n in NUISANCE if settings.free_contact),
+                               lengthen=tuple(sh.lengthen_s),
                                report=report)
         x = ms.x.copy()
         x_first, cost_first, history = ms.x_ms, ms.search.cost, None
@@ -420,6 +378,8 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
               else np.full(x.shape[0], np.nan))
     if ms is not None and not ms.confirmed:
         for j in range(x.shape[0]):
+            if problem.names[j] in NUISANCE and settings.free_contact:
+                continue
             unc.determined[j] = False
             unc.reasons[j].append("the optimum is not confirmed: " + "; ".join(ms.reasons))
         warnings.append("the optimum is NOT confirmed: " + "; ".join(ms.reasons))

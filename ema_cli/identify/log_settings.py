@@ -38,6 +38,7 @@ MAX_NOISE_PCT = 100.0  # the largest noise of synthetic data [% of the RMS]
 DEFAULT_STARTS = 8  # multiple shooting: Sobol starts over the bounds
 DEFAULT_SEGMENT_S = 0.05  # multiple shooting: segment length [s] (docs/identification.md)
 DEFAULT_MS_ITER = 60  # multiple shooting: most joint LM iterations of a start
+DEFAULT_LENGTHEN_S = (0.1, 0.2)  # multiple shooting: segments lengthened to these [s]
 MAX_STARTS = 256  # the most multiple-shooting starts
 
 
@@ -70,6 +71,10 @@ class ClosedLoopShooting(Strict):
     segment_s: PositiveFloat = Field(DEFAULT_SEGMENT_S, description="segment length [s]")
     max_iter: PositiveInt = Field(DEFAULT_MS_ITER, le=1000,
                                   description="most joint Levenberg-Marquardt iterations")
+    lengthen_s: list[PositiveFloat] = Field(
+        default_factory=lambda: list(DEFAULT_LENGTHEN_S),
+        description="longer segment lengths [s] the best start continues on, in order "
+                    "(fewer free states: less bias); [] for none")
 
 
 class ClosedLoopSettings(Strict):
@@ -104,6 +109,11 @@ class ClosedLoopSettings(Strict):
         DEFAULT_GA_HORIZON_S, description="the GA fits the log's first ga_horizon_s [s]; the "
         "polish then doubles the horizon up to the whole log (null, or polish: false: the "
         "GA fits the whole log)")
+    free_contact: bool = Field(
+        True, description="multiple shooting: free the contact's damping ratio zeta_t "
+        "[0.02, 1] and damping ramp contact_tau [0, 1 ms] as nuisance parameters unless plant "
+        "or free names them (a real contact follows neither of the model's laws); false: "
+        "the model's values")
     search: Literal["shooting", "ga"] = Field(
         "shooting", description="shooting: multiple shooting from many starts (default); ga: "
         "the GA over the first ga_horizon_s, then a polish over growing horizons")

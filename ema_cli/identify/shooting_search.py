@@ -425,9 +425,9 @@ def new_state(sp: ShootingProblem, V: np.ndarray, dt: float) -> LMState:
                    np.zeros(m, dtype=np.int64), np.zeros(m, bool))
 
 
-HALVING = ((10, 0.5), (10, 0.5))
-"""Successive halving of the starts: (LM iterations, fraction kept) per round; the rest run to
-convergence (at most ``max_iter`` iterations in all)."""
+HALVING = ((10, 0.5), (10, 0.75))
+"""Successive halving of the starts: (LM iterations, fraction kept) per round (8 -> 4 -> 3);
+the rest run to convergence (at most ``max_iter`` iterations in all)."""
 AGREE_REL = 1e-3  # two starts agree when their costs differ by less than this fraction [-]
 
 
@@ -457,6 +457,7 @@ class ShootingSearch:
     iterations: int
     history: list[float]
     timings: dict[str, float]
+    lengths: list[float] = field(default_factory=list)  # segment lengths continued to [s]
 
 
 def sobol_starts(lower: np.ndarray, upper: np.ndarray, n: int, seed: int) -> np.ndarray:

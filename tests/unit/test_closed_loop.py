@@ -96,8 +96,8 @@ def test_noise_free_log_gives_the_truth(clean):
 
 @pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_default_fit_of_a_default_log_gives_the_truth():
-    """The GA search (``search: ga``) on the issue's noise-free figure: a 4 s ``--make-data closed-loop`` log
-    (contact form, backlash 3 mrad) fitted with the default free set, bounds and budget. The
+    """The GA search (``search: ga``) on the issue's noise-free figure: a 4 s ``--make-data
+    closed-loop`` log (contact form, backlash 3 mrad) fitted with the default free set, bounds and budget. The
     GA on the first second and the polish continued over 1, 2, 4 s land on the truth
     (measured 1e-12 relative, 24 s on 2 cores); the GA on the whole log instead ends in
     another valley (kL +11 %, alpha +8 %; experiments/bench_identify_logs.py)."""
