@@ -60,8 +60,13 @@ def design_cmd(
     verdict = js["verdict"]
     style = {"PASS": "bold green", "FAIL": "bold red", "INCONCLUSIVE": "bold yellow"}[verdict]
     console.print(f"[{style}]{verdict}[/]: ema design {log}")
+    import textwrap
+
+    from ema_cli.cli.output import width
+
     for why in js["inconclusive_because"]:
-        console.print(f"  inconclusive: {why}", highlight=False)
+        console.print(textwrap.fill(f"inconclusive: {why}", width(), subsequent_indent="  "),
+                      highlight=False)
     ident = js["identification"]
     print_table("identified actuator (SI)", ["parameter", "value", "95 % interval", "unit"],
                 [[n, f"{p['value']:.5g}", f"[{p['ci95'][0]:.5g}, {p['ci95'][1]:.5g}]",
@@ -87,7 +92,8 @@ def design_cmd(
                 justify=["left", "left", "left", "left"], wrap=["failed tests"],
                 caption="corners: - low / + high end of each 95 % interval")
     for n in js["notes"]:
-        err_console.print(f"note: {n}", highlight=False)
+        err_console.print(textwrap.fill(f"note: {n}", width(), subsequent_indent="  "),
+                          highlight=False)
     n_pass = sum(c["passed"] for c in cases)
     console.print(f"{verdict}: {n_pass} of {len(cases)} cases pass in "
                   f"{js['timings_s']['total']:.0f} s -> {folder}", highlight=False)
