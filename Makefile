@@ -18,7 +18,7 @@ PIPI    := $(BIN)/python -m pip install -q --require-hashes --no-deps
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci clean \
+.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci design-ci clean \
         lock upgrade compile
 
 help:  ## list the targets
@@ -82,6 +82,11 @@ acceptance: $(STAMP)  ## the acceptance battery of the reference EMA (configs/ac
 acceptance-ci: $(STAMP)  ## the same as CI runs it (replaces results/acceptance-ci)
 	rm -rf results/acceptance-ci
 	$(EMA) acceptance configs/acceptance.yaml --out results/acceptance-ci
+
+design-ci: $(STAMP)  ## ema design on the bundled log, small budget (replaces results/design-ci)
+	rm -rf results/design-ci
+	$(EMA) design experiments/logs/design_hc_1pct.csv configs/design_ci.yaml \
+	  --spec configs/acceptance_geared.yaml --budget 192 --out results/design-ci
 
 lock: $(TSTAMP)  ## rewrite the locks from pyproject.toml, keeping every pin that still fits
 	$(UVC) -o $(LOCKS)/run.lock

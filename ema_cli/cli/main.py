@@ -13,6 +13,7 @@ from ema_cli import __version__
 from ema_cli.cli import (
     acceptance,
     compiling,
+    design,
     freqresp,
     identify,
     locations,
@@ -61,6 +62,7 @@ COMMANDS = (
     ("tune", tune.tune_cmd),
     ("sensitivity", sensitivity.sensitivity_cmd),
     ("identify", identify.identify_cmd),
+    ("design", design.design_cmd),
     ("reproduce", reproduce.reproduce_cmd),
     ("locations", locations.locations_cmd),
     ("params", locations.params_cmd),

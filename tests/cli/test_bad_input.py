@@ -31,6 +31,7 @@ WRITERS = {
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
     "acceptance": ["acceptance", str(ROOT / "configs" / "acceptance.yaml"), "--only", "margins"],
     "tune": ["tune", str(ROOT / "configs" / "tune.yaml"), "--budget", "128"],
+    "design": ["design", str(ROOT / "experiments" / "logs" / "design_hc_1pct.csv")],
     "sensitivity": ["sensitivity", str(ROOT / "configs" / "sensitivity.yaml"), "--n", "1",
                     "--set", "simulation.duration_s=0.01", "--no-progress", "-j", "1"],
 }
