@@ -56,13 +56,15 @@ test: $(TSTAMP)  ## lint, undeclared imports (deptry), the fast tier of the test
 test-all: test  ## make test, then the slow tier (cold compiles, long end-to-end checks)
 	$(BIN)/python -m pytest -n auto -m slow
 
-bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning
+bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, the identification battery (hours)
 	$(BIN)/python experiments/bench_compile.py
 	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
 	$(BIN)/python experiments/bench_identify_logs.py
+	$(BIN)/python -m experiments.loggen.battery --out results/battery/logs --n 20 --seed 2026 --jobs 2
+	$(BIN)/python experiments/identify_battery.py --battery results/battery/logs --out results/battery/fits
 	$(BIN)/python experiments/bench_sensitivity.py
 	$(BIN)/python experiments/bench_tune.py
 

@@ -167,6 +167,16 @@ def design_verdict(inconclusive: list[str], passed: list[bool]) -> str:
     return "PASS" if all(passed) else "FAIL"
 
 
+def primary_names(fit: Any) -> tuple[str, ...]:
+    """The free parameters a sign-off rests on: all but the contact's nuisance parameters
+    (``identify.closed_loop.NUISANCE``, freed by the fit unless stated), which stay at their
+    estimates in every case (their intervals, often unbounded, are not corners)."""
+    from ema_cli.identify.closed_loop import NUISANCE
+
+    skip = set(NUISANCE) if fit.shooting is not None and fit.settings.free_contact else set()
+    return tuple(n for n in fit.names if n not in skip)
+
+
 def fit_doubts(fit: Any) -> list[str]:
     """Why the identification cannot carry a sign-off (empty: it can): the optimum not
     confirmed (or, with the GA search, not checked), a free parameter not determined."""
@@ -177,7 +187,8 @@ def fit_doubts(fit: Any) -> list[str]:
                    "search: shooting confirms it)")
     elif not ms.confirmed:
         out.append("the identification's optimum is not confirmed: " + "; ".join(ms.reasons))
-    bad = [n for n, d in zip(fit.names, fit.uncertainty.determined, strict=True) if not d]
+    bad = [n for n, d in zip(fit.names, fit.uncertainty.determined, strict=True)
+           if not d and n in primary_names(fit)]
     if bad:
         out.append("not determined by the log: " + ", ".join(bad))
     return out
@@ -351,9 +362,10 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
     timings["identification"] = time.perf_counter() - t0
     doubts = fit_doubts(fit)
     plant = fitted_config(fit, "reference.csv")["plant"]
-    if len(fit.names) > MAX_FREE_CORNERS:
-        raise EmaError(f"identify.free: {len(fit.names)} free parameters make "
-                       f"{2 ** len(fit.names)} interval corners; at most {MAX_FREE_CORNERS}")
+    n_prim = len(primary_names(fit))
+    if n_prim > MAX_FREE_CORNERS:
+        raise EmaError(f"identify.free: {n_prim} free parameters make {2 ** n_prim} interval "
+                       f"corners; at most {MAX_FREE_CORNERS}")
 
     say("2/3 tuning on the fitted actuator")
     t0 = time.perf_counter()
@@ -366,19 +378,22 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
     timings["tuning"] = time.perf_counter() - t0
 
     gains = tuned.tuned
-    names = fit.names
+    names = primary_names(fit)
+    idx = [fit.names.index(n) for n in names]
     u = fit.uncertainty
     import numpy as np
 
-    low = np.maximum(u.ci_low, [max(fit.problem.lower[j], MIN_POSITIVE.get(n, -np.inf))
-                                for j, n in enumerate(names)])
-    high = np.minimum(u.ci_high, fit.problem.upper)
-    cases_in = [("nominal", {n: float(fit.x[j]) for j, n in enumerate(names)}, {})]
+    ci_low, ci_high = u.ci_low[idx], u.ci_high[idx]
+    low = np.maximum(ci_low, [max(fit.problem.lower[j], MIN_POSITIVE.get(fit.names[j], -np.inf))
+                              for j in idx])
+    high = np.minimum(ci_high, fit.problem.upper[idx])
+    cases_in = [("nominal", {n: float(fit.x[j]) for j, n in enumerate(fit.names)}, {})]
     if np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
         for k, (vals, sides) in enumerate(corners(names, low, high)):
-            cases_in.append((f"corner-{k + 1:02d}", vals, sides))
+            # the nuisance parameters (not corners) at their estimates
+            cases_in.append((f"corner-{k + 1:02d}", {**cases_in[0][1], **vals}, sides))
         clipped = [n for j, n in enumerate(names)
-                   if low[j] != u.ci_low[j] or high[j] != u.ci_high[j]]
+                   if low[j] != ci_low[j] or high[j] != ci_high[j]]
         if clipped:
             notes.append("interval corners clipped to the identification bounds: "
                          + ", ".join(clipped))

@@ -30,6 +30,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -168,10 +169,19 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                  max_iter=max_iter, report=report)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    # the runner-up goes the same way, so that the agreement compares like with like
+    runner = None
+    if res.final_V is not None and len(res.final_V) > 1:
+        runner = dataclasses.replace(res, V=res.final_V[1].copy(), x=res.final_x[1].copy(),
+                                     cost=float(res.final_cost[1]), lengths=[])
     for length in lengthen:  # longer segments from the optimum: fewer free states
         if report:
             report(f"segments of {length:g} s", 0, 1)
         lengthened(res, length, dt_search, LENGTHEN_ITER)
+        if runner is not None:
+            lengthened(runner, length, dt_search, LENGTHEN_ITER)
+    x_best_coarse = res.x.copy()
+    x_runner = None if runner is None else runner.x.copy()
     timings["lengthen_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     fine = problem.dt
@@ -211,12 +221,12 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     high = too_high(ratios, notes)
     judged = [v for c, v in ratios.items() if notes[c] == NOISE_NOTE]
     at_noise = bool(judged) and max(judged) <= AT_NOISE_RATIO
-    # starts that ended within the estimate's interval half-widths of the best one (both at
-    # the search's step; primary parameters) agree with it
+    # the runner-up agrees when, carried through the same lengthening, it ends within the
+    # estimate's interval half-widths of the best one (both at the search's step)
     prim = [j for j, n in enumerate(problem.names) if n not in nuisance]
     hw = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)[prim]
-    res.agree = 1 + int(sum(np.all(np.abs(x[prim] - res.final_x[0][prim]) <= hw)
-                            for x in res.final_x[1:]))
+    res.agree = 1 + int(x_runner is not None and
+                        bool(np.all(np.abs(x_runner[prim] - x_best_coarse[prim]) <= hw)))
     if res.agree < 2:
         reasons.append(f"no other of the {n_fin} starts that ran to the end came within the "
                        f"estimate's 95 % intervals (costs J = {res.cost:.6g} and "

@@ -458,6 +458,7 @@ class ShootingSearch:
     history: list[float]
     timings: dict[str, float]
     lengths: list[float] = field(default_factory=list)  # segment lengths continued to [s]
+    final_V: np.ndarray | None = None  # scaled unknowns of the finishing starts, best first
 
 
 def sobol_starts(lower: np.ndarray, upper: np.ndarray, n: int, seed: int) -> np.ndarray:
@@ -531,4 +532,5 @@ def search(problem: ClosedLoopProblem, *, n_starts: int, segment_s: float, dt: f
     agree = int(np.sum(costs <= costs[0] * (1.0 + AGREE_REL)))
     x_best = xs[0]
     return ShootingSearch(sp, x_best, st.V[best].copy(), float(st.cost[best]), X0, xs,
-                          costs, agree, int(st.iterations[best]), history, timings)
+                          costs, agree, int(st.iterations[best]), history, timings,
+                          final_V=st.V[finished].copy())

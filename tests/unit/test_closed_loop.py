@@ -54,7 +54,7 @@ def clean():
 
 
 def test_the_simulator_at_the_truth_reproduces_the_log(clean):
-    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT), as_log(clean))
+    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT, free_contact=False), as_log(clean))
     x = np.array([clean.truth[n] for n in problem.names])
     Y = problem.predict(x[None])[0]
     # the log's command went through deg and back (rounding only): the same simulation
@@ -73,7 +73,7 @@ def _fd_mismatch(problem, x, j, rel):
 
 
 def test_batched_jacobian_matches_one_sided_differences(clean):
-    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT), as_log(clean))
+    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT, free_contact=False), as_log(clean))
     x = np.array([clean.truth[n] for n in problem.names])
     j = problem.names.index("kL")
     # forward difference (step 3e-4 of kL) vs the central one (1e-4): measured 1.6 % of the
@@ -83,7 +83,8 @@ def test_batched_jacobian_matches_one_sided_differences(clean):
     # the jump form (contact_tau = 0, the damping torque jumps at each impact) on the same log
     # is not differentiable at this scale: the two differences disagree by 48 % (measured;
     # 87 % at 1e-3, 240 % at 3e-5), the reason for the ramp (docs/model.md §2)
-    jump, _ = build_problem(ClosedLoopSettings(plant={"contact_tau": 0.0}), as_log(clean))
+    jump, _ = build_problem(ClosedLoopSettings(plant={"contact_tau": 0.0}, free_contact=False),
+                            as_log(clean))
     assert _fd_mismatch(jump, x, j, 3e-4) > 0.3
 
 
@@ -97,8 +98,8 @@ def test_noise_free_log_gives_the_truth(clean):
 @pytest.mark.slow  # the slow tier: make test-all (CI runs it)
 def test_default_fit_of_a_default_log_gives_the_truth():
     """The GA search (``search: ga``) on the issue's noise-free figure: a 4 s ``--make-data
-    closed-loop`` log (contact form, backlash 3 mrad) fitted with the default free set, bounds and budget. The
-    GA on the first second and the polish continued over 1, 2, 4 s land on the truth
+    closed-loop`` log (contact form, backlash 3 mrad) fitted with the default free set, bounds
+    and budget. The GA on the first second and the polish continued over 1, 2, 4 s land on the truth
     (measured 1e-12 relative, 24 s on 2 cores); the GA on the whole log instead ends in
     another valley (kL +11 %, alpha +8 %; experiments/bench_identify_logs.py)."""
     syn = closed_loop_log({}, 0.0, 0)
@@ -115,7 +116,7 @@ def test_continuation_horizons_and_prefix(clean):
     assert horizons(2.0, 1.0) == [1.0, 2.0]
     assert horizons(1.2, 1.0) == [1.2]
     assert horizons(4.0, None) == [4.0]
-    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT), as_log(clean))
+    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT, free_contact=False), as_log(clean))
     part = problem.prefix(0.5)
     assert part.log.n == 501 and part.log.t[-1] == 0.5
     assert np.array_equal(part.scales, problem.scales) and part.names == problem.names
@@ -234,7 +235,7 @@ def test_non_uniform_log_is_interpolated(clean):
     ch = {c: np.interp(t, log.t, y) for c, y in log.channels.items()}
     uneven = ClosedLoopLog(t, np.interp(t, log.t, log.theta_ref), ch, "uneven", 0.0,
                            clean.truth)
-    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT), uneven)
+    problem, _ = build_problem(ClosedLoopSettings(plant=PLANT, free_contact=False), uneven)
     x = np.array([clean.truth[n] for n in problem.names])
     Y = problem.predict(x[None])[0]
     for j, c in enumerate(problem.channels):

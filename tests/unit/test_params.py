@@ -23,7 +23,8 @@ from ema_cli.model.params import (
 
 MODEL_MD = Path(__file__).resolve().parents[2] / "docs" / "model.md"
 DERIVED = {"c", "Fs", "sigma0", "sigma1"}
-NEGATIVE_OK = {"T_load", "k_h"}  # docs/model.md §4: only these may be negative
+NEGATIVE_OK = {"T_load", "k_h", "x0_theta_m", "x0_w_m", "x0_i", "x0_theta_L", "x0_w_L", "x0_z",
+               "x0_xI"}  # docs/model.md §4: only these may be negative (loads, initial states)
 
 
 def doc_table(heading: str) -> list[list[str]]:

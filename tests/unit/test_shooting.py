@@ -91,7 +91,7 @@ def test_segments_at_the_truth_fit_to_the_noise_level():
 
     syn = closed_loop_log({"kL": 450.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 1.0, 1,
                           duration_s=1.0)
-    problem, _ = build_problem(ClosedLoopSettings(), _log(syn))
+    problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
     x = np.array([syn.truth[n] for n in problem.names])
     sp = ss.build(problem, 0.2, x)
     V = ss.start_states(sp, x[None], 5e-5)
@@ -107,14 +107,16 @@ def test_segments_at_the_truth_fit_to_the_noise_level():
 def short_fit():
     syn = closed_loop_log({"kL": 420.0, "alpha": 0.0055, "Fc": 0.05, "sigma2": 0.02}, 1.0, 3,
                           duration_s=1.0)
-    settings = ClosedLoopSettings(shooting={"starts": 4}, profile_points=5)
+    settings = ClosedLoopSettings(shooting={"starts": 4, "lengthen_s": [0.2]},
+                                  free_contact=False, profile_points=5)
     return syn, run_closed_loop(settings, _log(syn))
 
 
 def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
     """A 1 s log (1 % noise, truths far from the defaults) from the default bounds with 4
-    starts: kL, alpha within 0.5 %, Fc, sigma2 within 2 %, every truth inside its 95 %
-    interval, the optimum confirmed."""
+    starts, the contact law stated (the data's), segments lengthened 0.05 -> 0.2 s: kL, alpha
+    within 0.5 %, Fc, sigma2 within 2 %, every truth inside its 95 % interval, the optimum
+    confirmed."""
     syn, fit = short_fit
     js = fit.to_json()
     e = js["error_pct_vs_truth"]
@@ -123,15 +125,16 @@ def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
     assert js["optimum"]["confirmed"] is True, js["optimum"]
     assert all(js["truth_in_ci95"].values()), (js["truth_in_ci95"], js["parameters"])
     assert js["not_determined"] == []
-    assert js["shooting"]["segments"] == 20  # 0.05 s each
+    assert js["shooting"]["segments"] == 5 and js["shooting"]["lengthened_to_s"] == [0.2]
 
 
 def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
     """The load inertia fixed 30 % high: the segments cannot reach the noise level, so the
     optimum is not confirmed and no parameter is reported as determined."""
     syn = closed_loop_log({}, 1.0, 0, duration_s=1.0)
-    settings = ClosedLoopSettings(plant={"JL": 0.013}, shooting={"starts": 2, "max_iter": 10},
-                                  polish=False, profile_points=5)
+    settings = ClosedLoopSettings(plant={"JL": 0.013}, free_contact=False, polish=False,
+                                  shooting={"starts": 2, "max_iter": 10, "lengthen_s": []},
+                                  profile_points=5)
     js = run_closed_loop(settings, _log(syn)).to_json()
     assert js["optimum"]["confirmed"] is False
     assert any("noise level" in r for r in js["optimum"]["not_confirmed_because"])
