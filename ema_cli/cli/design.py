@@ -79,7 +79,7 @@ def design_cmd(
     print_table(f"tuned controller ({tr['evaluations']} evaluations)",
                 ["gain", "before", "after"], rows)
     cases = js["acceptance"]["cases"]
-    names = list(ident["parameters"])
+    names = [n for n in ident["parameters"] if any(n in c["sides"] for c in cases)]
     crows = []
     for c in cases:
         sides = "".join({"low": "-", "high": "+"}[c["sides"][n]] for n in names) if c[
