@@ -135,7 +135,8 @@ def sweep_cmd(
                        "are cached", 1)
 
 
-KINDS = ("auto", "study", "experiment", "identify", "acceptance", "sensitivity", "tune")
+KINDS = ("auto", "study", "experiment", "identify", "acceptance", "sensitivity", "tune",
+         "design")
 """What `ema validate` can check: a study config, an experiment batch, identification settings,
 an acceptance spec, a sensitivity study."""
 
@@ -145,6 +146,8 @@ def detect_kind(config: Path) -> str:
     from ema_cli.config.loader import read_yaml
 
     keys = set(read_yaml(config))
+    if keys & {"identify", "tune"}:
+        return "design"
     if keys & {"scenarios", "variables", "optimiser"}:
         return "tune"
     if keys & {"tests", "actuator"}:
@@ -166,8 +169,8 @@ def validate_cmd(
     kind: Annotated[str, typer.Option(
         "--kind", help="What CONFIG is: study (`ema sweep`/`simulate`), experiment "
                        "(`ema reproduce`), identify (`ema identify`), acceptance (`ema "
-                       "acceptance`), sensitivity (`ema sensitivity`), tune (`ema tune`) or "
-                       "auto (from its keys).")
+                       "acceptance`), sensitivity (`ema sensitivity`), tune (`ema tune`), "
+                       "design (`ema design`) or auto (from its keys).")
     ] = "auto",
 ) -> None:
     """Check CONFIG against its schema (fast: nothing is simulated); for a study, count its
@@ -193,6 +196,15 @@ def validate_cmd(
         n_limits = sum(len(t.limits) for t in spec.tests.values())
         console.print(f"{config}: valid acceptance spec; {len(spec.tests)} tests, {n_limits} "
                       "limits")
+        return
+    if kind == "design":
+        from ema_cli.config.design import DesignConfig
+        from ema_cli.config.loader import load_config
+
+        d = load_config(config, overrides, DesignConfig)
+        console.print(f"{config}: valid design config ({d.name}); the identify and tune "
+                      "sections are checked against their own schemas when `ema design` "
+                      "runs with the log")
         return
     if kind == "tune":
         from ema_cli.config.loader import load_config

@@ -126,8 +126,11 @@ def test_end_to_end_tiny_and_inconclusive(tmp_path, monkeypatch):
     assert js["verdict"] == "INCONCLUSIVE" and js["exit_code"] == 3
     assert "forced by the test" in js["inconclusive_because"][-1]
     ident = js["identification"]["parameters"]
-    assert list(ident) == ["kL", "alpha", "Fc", "sigma2"]
+    # the contact law unstated: zeta_t and contact_tau free nuisance parameters, not corners
+    assert list(ident) == ["kL", "alpha", "Fc", "sigma2", "zeta_t", "contact_tau"]
     cases = js["acceptance"]["cases"]
+    assert all(set(c["sides"]) <= {"kL", "alpha", "Fc", "sigma2"} for c in cases)
+    assert all(c["parameters"]["zeta_t"] == cases[0]["parameters"]["zeta_t"] for c in cases)
     assert len(cases) == 1 + 2**4
     assert cases[0]["case"] == "nominal" and cases[0]["sides"] == {}
     assert len(cases[0]["tests"]) == 6  # configs/acceptance_geared.yaml

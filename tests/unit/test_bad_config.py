@@ -447,8 +447,10 @@ def test_bundled_experiment_and_configs_still_validate():
     root = Path(__file__).resolve().parents[2]
     load_experiment(root / "experiments" / "paper2020.yaml")
     from ema_cli.config.acceptance import AcceptanceSpec
+    from ema_cli.config.design import DesignConfig
 
-    models = {"identify": IdentifySettings, "acceptance": AcceptanceSpec}
+    models = {"identify": IdentifySettings, "acceptance": AcceptanceSpec,
+              "acceptance_geared": AcceptanceSpec, "design_ci": DesignConfig}
     for f in sorted((root / "configs").glob("*.yaml")):
         from ema_cli.config.sensitivity import SensitivityConfig
         from ema_cli.config.tune import TuneConfig
