@@ -89,13 +89,17 @@ def summarise(df: pd.DataFrame) -> str:
         flagged = ~d["confirmed"].to_numpy(bool)
         misses = ~within
         cover = np.mean([d[f"{n}_covered"].to_numpy(bool) for n in NAMES])
+        conf = d["confirmed"].to_numpy(bool)
+        cover_c = (np.mean([d[f"{n}_covered"].to_numpy(bool)[conf] for n in NAMES])
+                   if conf.any() else float("nan"))
         lines += [f"## law {which} ({len(d)} logs; tolerances " + ", ".join(
             f"{n} {tol[n]:g} %" for n in NAMES) + ")", "",
             f"- within tolerance: {int(within.sum())} of {len(d)}",
             f"- misses flagged (optimum not confirmed): {int((misses & flagged).sum())} of "
             f"{int(misses.sum())}; hits flagged: {int((within & flagged).sum())}",
             f"- 95 % intervals covering the truth: {100 * cover:.1f} % of "
-            f"{len(d) * len(NAMES)} estimates",
+            f"{len(d) * len(NAMES)} estimates; of the confirmed fits' estimates: "
+            f"{100 * cover_c:.1f} % of {int(conf.sum()) * len(NAMES)}",
             f"- wall time per fit: median {d['wall_s'].median():.0f} s, max "
             f"{d['wall_s'].max():.0f} s", "",
             "| log | excitation | rate Hz | noise % | " + " | ".join(
