@@ -49,7 +49,8 @@ def channel_figure(fit: ClosedLoopFit, channel: str) -> Figure:
     yh = fit.prediction[j] / f
     fig, (a0, a1) = subplots(2, 1, figsize=(11, 6.5), sharex=True)
     a0.plot(t, y, ".", color="0.55", ms=1.5, label="measured")
-    a0.plot(t, yh, "C0", lw=0.9, label="fitted model")
+    a0.plot(t, yh, "C0", lw=0.9, label="fitted model" if fit.shooting is None else
+            "fitted model, run from rest over the whole log (the fit is by segments)")
     a0.set_ylabel(f"{CHANNEL_LABELS[channel]} [{unit}]")
     a0.set_title(f"{CHANNEL_LABELS[channel]}: measured and fitted")
     a0.legend(fontsize=8, loc="upper left")
