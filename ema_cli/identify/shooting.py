@@ -1,5 +1,5 @@
 """Multiple shooting for the closed-loop fit: the log cut into short segments, each simulated
-from an estimated initial state, the segments joined by soft continuity residuals.
+from an estimated initial state.
 
 Why: with backlash, the load flies free in the gap and small differences in impact timing
 grow; over a long log the output-error cost of single shooting is rugged and nearly chaotic
@@ -13,15 +13,11 @@ Unknowns (scaled): the free parameters ``u = (x - lo)/(hi - lo)`` in [0, 1] and,
 (:func:`state_scales`), where the motor angle is given by its position in the gap,
 ``q = (theta_m/m - theta_L)/(alpha + GAP_FLOOR)`` (|q| < 1: in the gap), so that a segment
 stays at the same place in the gap, in contact or not, when alpha changes; z starts at its
-steady state (:data:`VAR_STATES`). Residuals::
-
-    data         (y_c,i - yhat_c,i(x, S_k)) / s_c        every log sample, once
-    continuity   (E_k(x, S_k) - S_k+1)[s] / (kappa*sigma_s)   s: the six recorded states
-
-``E_k`` is the state simulated at the end of segment ``k`` (its last sample is the first of
-the next). The continuity residuals are soft: a defect of ``kappa`` state scales costs as much
-as one sample one noise level off, so the segments are joined without making the cost of a
-long log rugged again (kappa: :data:`CONTINUITY_KAPPA`).
+steady state (:data:`VAR_STATES`). The residuals are the data's,
+``(y_c,i - yhat_c,i(x, S_k)) / s_c``, every log sample once (owned by one segment). There are
+no continuity residuals: the segments are joined only through their seating
+(``shooting_search.chain_seat`` restarts a segment from its predecessor's simulated end state,
+which :meth:`ShootingProblem.simulate` returns, where that fits better).
 
 Every evaluation (a residual vector, a whole finite-difference Jacobian) is ONE batched kernel
 call: rows = candidates x segments, each row following its own segment's command.
@@ -46,9 +42,6 @@ NV = len(VAR_STATES)
 """The bristle state z is not estimated: it forgets its initial value within milliseconds
 (too weakly observable to estimate, and its estimate would wander outside |z| <= Fs/sigma0);
 each segment starts it at the LuGre steady state of its motor speed."""
-CONT_STATES = (0, 1, 2, 3, 4)  # states joined by continuity: not z (forgotten within
-# milliseconds, stiff) nor xI (not recorded)
-CONTINUITY_KAPPA = 1.0  # continuity residual = defect / (kappa * state scale) [-]
 STATE_FD_REL = 1e-3  # finite-difference step of a state, in state scales [-]
 PARAM_FD_REL = 1e-4  # finite-difference step of a parameter, relative (see fd steps) [-]
 STATE_SCALE_FRACTION = 1e-2  # a state's scale: this fraction of its RMS over the log [-]
@@ -56,7 +49,6 @@ FAILED = 1e6  # residual of a diverged or non-finite simulation [-]
 _SIG_OF_STATE = ("theta_motor", "omega_motor", "current", "theta_load", "omega_load",
                  "voltage_cmd", "theta_ref")
 """The recorded signals of the end states (theta_motor is theta_m/m); the last two give xI."""
-"""The recorded signal of each continuity state (theta_motor is theta_m/m)."""
 
 
 @dataclass(frozen=True)
@@ -99,13 +91,11 @@ class ShootingProblem:
                 scales (its ``params`` maps a free vector to SI parameters)
     seg         the segments
     sigma       state scales [N_X] (SI)
-    kappa       continuity softness (:data:`CONTINUITY_KAPPA`)
     """
 
     base: ClosedLoopProblem
     seg: Segments
     sigma: np.ndarray
-    kappa: float = CONTINUITY_KAPPA
     evaluations: int = 0  # simulated segment runs
     kernel_steps: int = 0
     kernel_s: float = 0.0
@@ -168,7 +158,8 @@ class ShootingProblem:
         """Run parameter rows (initial states in their x0 columns), row r following segment
         ``seg_of_row[r]``, in one kernel call at step ``dt`` -> (the simulated channels at the
         segment's samples ``Y[rows, n_ch, L]``, padded past a segment's end by its last value;
-        end states ``[rows, len(CONT_STATES)]``; diverged ``[rows]``)."""
+        end states ``[rows, NV]`` in VAR_STATES order (xI from the controller's law);
+        diverged ``[rows]``)."""
         from ema_cli.sim.runner import simulate_batch
         from ema_cli.sim.tables import SIG
 
@@ -263,11 +254,6 @@ class ShootingProblem:
         G = Yc[:, owner, :, local]  # [N, n_cand, n_ch] (advanced indices first)
         G = G.transpose(1, 2, 0)
         return (b.measured[None] - G) / b.scales[None, :, None]
-
-    def end_states(self, ends: np.ndarray) -> np.ndarray:
-        """Continuity defects of one candidate's segments (its end states ``ends[n_seg, 5]``
-        minus the next segments' starts), in state scales [n_seg - 1, 5] (a diagnostic)."""
-        return ends
 
     def rows_many(self, V: np.ndarray) -> np.ndarray:
         """Parameter rows of candidates ``V[m, n_vars]`` (scaled): m*n_seg rows, candidate

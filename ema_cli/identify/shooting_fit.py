@@ -128,6 +128,15 @@ def ms_uncertainty(res: ShootingSearch, dt: float) -> tuple[Uncertainty, np.ndar
 LENGTHEN_ITER = 20  # joint LM iterations at each longer segment length
 
 
+def continue_at(res: ShootingSearch, dt: float, iterations: int) -> None:
+    """Continue the best start at step ``dt`` [s] (in place): re-seated, then joint LM."""
+    st = new_state(res.sp, res.V[None], dt)
+    st.V, st.R, st.cost = chain_seat(res.sp, st.V, dt)
+    lm_many(res.sp, st, dt, iterations)
+    res.V, res.cost = st.V[0].copy(), float(st.cost[0])
+    res.x = res.sp.unpack(res.V)[0]
+
+
 def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -> None:
     """Continue the search's best start on segments of ``length`` [s] (in place): each new
     segment starts from the state of the old segment that started at the same sample (the
@@ -190,11 +199,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     if fine < dt_search and refine_iter > 0:  # the coarse step's bias off (contact timing)
         if report:
             report(f"refining at dt = {fine:g} s", 0, 1)
-        st = new_state(res.sp, res.V[None], fine)
-        st.V, st.R, st.cost = chain_seat(res.sp, st.V, fine)
-        lm_many(res.sp, st, fine, refine_iter)
-        res.V, res.cost = st.V[0].copy(), float(st.cost[0])
-        res.x = res.sp.unpack(res.V)[0]
+        continue_at(res, fine, refine_iter)
     timings["refine_s"] = time.perf_counter() - t0
     # the step's own error: the same refinement at half the step; the estimate is the half
     # step's, its intervals widened by how far it moved (a fixed step times each contact to
@@ -205,11 +210,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     if step_check_iter > 0:
         if report:
             report(f"step check at dt = {half:g} s", 0, 1)
-        st = new_state(res.sp, res.V[None], half)
-        st.V, st.R, st.cost = chain_seat(res.sp, st.V, half)
-        lm_many(res.sp, st, half, step_check_iter)
-        res.V, res.cost = st.V[0].copy(), float(st.cost[0])
-        res.x = res.sp.unpack(res.V)[0]
+        continue_at(res, half, step_check_iter)
     shift = res.x - x_step
     timings["step_check_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -12,7 +12,7 @@ near-singular problem is detected (condition number) rather than inverted into n
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,32 +74,44 @@ def covariance(J: np.ndarray, r: np.ndarray,
     infinite variance.
     """
     N, p = J.shape
-    dof = max(N - p, 1)
+    if groups is None:
+        groups = [slice(0, N)]
+
+    def meat(Js: np.ndarray) -> np.ndarray:
+        B = np.zeros((p, p))
+        for g in groups:
+            Jg, rg = Js[g], r[g]
+            n_g = Jg.shape[0]
+            if n_g == 0:
+                continue
+            s2 = float(rg @ rg) / max(n_g - p * n_g / N, 1.0)
+            B += s2 * (Jg.T @ Jg)
+        return B
+
+    cov, cond = _sandwich(J, meat)
+    return cov, cond, max(N - p, 1)
+
+
+def _sandwich(J: np.ndarray, meat: Callable[[np.ndarray], np.ndarray]
+              ) -> tuple[np.ndarray, float]:
+    """``A^-1 B A^-1`` with ``A = J^T J`` inverted through the SVD of J with columns scaled to
+    unit norm and ``B = meat(J scaled)`` -> (cov[p, p], condition number). Directions with a
+    singular value below ``1/MAX_COND`` of the largest are dropped from the inverse and the
+    parameters taking part in them get an infinite variance."""
     norms = np.linalg.norm(J, axis=0)
     norms = np.where(norms > 0, norms, 1.0)
     Js = J / norms
-    U, s, Vt = np.linalg.svd(Js, full_matrices=False)
+    _, s, Vt = np.linalg.svd(Js, full_matrices=False)
     cond = float(s[0] / s[-1]) if s[-1] > 0 else np.inf
     keep = s > s[0] / MAX_COND
     inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
     Ainv_s = (Vt.T * inv_s**2) @ Vt  # (Js^T Js)^-1 on the kept directions
-    if groups is None:
-        groups = [slice(0, N)]
-    B = np.zeros((p, p))
-    for g in groups:
-        Jg, rg = Js[g], r[g]
-        n_g = Jg.shape[0]
-        if n_g == 0:
-            continue
-        s2 = float(rg @ rg) / max(n_g - p * n_g / N, 1.0)
-        B += s2 * (Jg.T @ Jg)
-    cov_s = Ainv_s @ B @ Ainv_s
-    cov = cov_s / np.outer(norms, norms)
+    cov = (Ainv_s @ meat(Js) @ Ainv_s) / np.outer(norms, norms)
     # a direction dropped from the inverse is undetermined: infinite variance along it
     for k in np.flatnonzero(~keep):
         for j in np.flatnonzero(np.abs(Vt[k]) > NULL_SHARE):
             cov[j, j] = np.inf
-    return cov, cond, dof
+    return cov, cond
 
 
 def covariance_clustered(J: np.ndarray, r: np.ndarray, clusters: Sequence[np.ndarray]
@@ -112,27 +124,17 @@ def covariance_clustered(J: np.ndarray, r: np.ndarray, clusters: Sequence[np.nda
     cov = ``A^-1 B A^-1``; ``dof = G - 1`` for Student's t (G clusters). Near-null directions
     of the column-scaled J get an infinite variance, as in :func:`covariance`.
     """
-    N, p = J.shape
     G = len(clusters)
-    dof = max(G - 1, 1)
-    norms = np.linalg.norm(J, axis=0)
-    norms = np.where(norms > 0, norms, 1.0)
-    Js = J / norms
-    U, s, Vt = np.linalg.svd(Js, full_matrices=False)
-    cond = float(s[0] / s[-1]) if s[-1] > 0 else np.inf
-    keep = s > s[0] / MAX_COND
-    inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
-    Ainv_s = (Vt.T * inv_s**2) @ Vt
-    B = np.zeros((p, p))
-    for idx in clusters:
-        sc = Js[idx].T @ r[idx]
-        B += np.outer(sc, sc)
-    B *= G / max(G - 1, 1)
-    cov = (Ainv_s @ B @ Ainv_s) / np.outer(norms, norms)
-    for k in np.flatnonzero(~keep):
-        for j in np.flatnonzero(np.abs(Vt[k]) > NULL_SHARE):
-            cov[j, j] = np.inf
-    return cov, cond, dof
+
+    def meat(Js: np.ndarray) -> np.ndarray:
+        B = np.zeros((J.shape[1], J.shape[1]))
+        for idx in clusters:
+            sc = Js[idx].T @ r[idx]
+            B += np.outer(sc, sc)
+        return B * (G / max(G - 1, 1))
+
+    cov, cond = _sandwich(J, meat)
+    return cov, cond, max(G - 1, 1)
 
 
 def assess(names: Sequence[str], x: np.ndarray, cov: np.ndarray, dof: int, cond: float,
