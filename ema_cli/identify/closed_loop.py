@@ -42,18 +42,25 @@ CHANNELS: dict[str, tuple[str, float, str]] = {
     "voltage_cmd_v": ("voltage_cmd", 1.0, "V"),
 }
 """Measured channel (log column) -> (simulator signal, edge -> SI factor, edge unit)."""
-FREE_NAMES = ("kL", "alpha", "zeta_t", "c", "contact_tau", "Fc", "Fs", "vs", "sigma2", "sigma0",
-              "Jm", "JL", "bL")
+FREE_NAMES = ("kL", "alpha", "zeta_t", "c", "contact_tau", "contact_hc", "Fc", "Fs", "vs",
+              "sigma2", "sigma0", "Jm", "JL", "bL")
 """Parameters a closed-loop fit may free (names of ``ema params``)."""
 FRICTION_NAMES = ("Fc", "Fs", "vs", "sigma2", "sigma0")
 DEFAULT_FREE: dict[str, tuple[float, float]] = {
     "kL": (300.0, 900.0), "alpha": (0.0, 0.01), "Fc": (0.0, 0.1), "sigma2": (0.0, 0.1)}
 """The free set without a config: bounds in SI (N*m/rad, rad, N*m, N*m*s/rad)."""
-NUISANCE: dict[str, tuple[float, float]] = {"zeta_t": (0.02, 1.0), "contact_tau": (0.0, 1e-3)}
+NUISANCE: dict[str, tuple[float, float]] = {"zeta_t": (0.02, 1.0), "contact_tau": (0.0, 1e-3),
+                                            "contact_hc": (0.0, 1.0)}
 """The contact's parameters freed by a multiple-shooting fit unless stated (settings
-``free_contact``): SI bounds (-, s). Reported, but neither the verdict's bound rule nor its
-"not determined" applies to them: a contact on a physical bound (tau = 0: the jump law) is an
-answer, and the primary parameters' intervals already carry their correlation with them."""
+``free_contact``): SI bounds (-, s, -): its damping, the damping's ramp-in time and its
+Hunt-Crossley share (damping growing with the penetration; docs/model.md §1). Reported, but
+neither the verdict's bound rule nor its "not determined" applies to them: a contact on a
+physical bound (tau = 0: the jump law) is an answer, and the primary parameters' intervals
+already carry their correlation with them."""
+CONTACT_SHAPE = ("contact_tau", "contact_hc")
+"""The contact law's shape: stating one of them (plant or free) states the law, and the others
+keep their model values (``contact_tau = 0`` alone is the jump law, with no Hunt-Crossley
+share)."""
 MIN_LOG_ROWS = 50  # fewest samples accepted in a log [rows]
 MIN_LOG_DURATION_S = 0.05  # shortest log accepted [s]
 MIN_POSITIVE = {"Fc": 1e-9, "vs": 1e-9, "Jm": 1e-12, "JL": 1e-12}

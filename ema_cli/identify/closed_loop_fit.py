@@ -33,6 +33,7 @@ import numpy as np
 from ema_cli.errors import EmaError
 from ema_cli.identify.closed_loop import (
     CHANNELS,
+    CONTACT_SHAPE,
     NOISE_NOTE,
     NUISANCE,
     ClosedLoopLog,
@@ -216,6 +217,8 @@ def build_problem(settings: ClosedLoopSettings, log: ClosedLoopLog) -> tuple[
     free = dict(settings.free)
     if settings.search == "shooting" and settings.free_contact:
         stated = set(settings.plant) | set(free)
+        if stated & set(CONTACT_SHAPE):  # a stated law: its whole shape, the rest at defaults
+            stated |= set(CONTACT_SHAPE)
         for n, b in NUISANCE.items():
             if n not in stated and not (n == "zeta_t" and "c" in stated):
                 free[n] = b

@@ -111,9 +111,11 @@ class ClosedLoopSettings(Strict):
         "GA fits the whole log)")
     free_contact: bool = Field(
         True, description="multiple shooting: free the contact's damping ratio zeta_t "
-        "[0.02, 1] and damping ramp contact_tau [0, 1 ms] as nuisance parameters unless plant "
-        "or free names them (a real contact follows neither of the model's laws); false: "
-        "the model's values")
+        "[0.02, 1], damping ramp contact_tau [0, 1 ms] and Hunt-Crossley share contact_hc "
+        "[0, 1] as nuisance parameters unless plant or free names them (naming "
+        "contact_tau or contact_hc states the law's shape: both are then fixed, e.g. "
+        "contact_tau: 0 is the jump law); a real contact follows none of the model's laws; "
+        "false: the model's values")
     search: Literal["shooting", "ga"] = Field(
         "shooting", description="shooting: multiple shooting from many starts (default); ga: "
         "the GA over the first ga_horizon_s, then a polish over growing horizons")

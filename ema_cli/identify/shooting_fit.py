@@ -8,7 +8,9 @@
    sandwich with the segments as clusters (residuals may be correlated inside a segment: model
    error, coloured noise), Student's t with G - 1 degrees of freedom.
    The best start and the runner-up then continue on longer segments (``lengthen``, e.g.
-   0.1 then 0.2 s: fewer free states, less bias; :func:`lengthened`).
+   0.1 then 0.2 s: fewer free states, less bias; :func:`lengthened`). The move at the last
+   lengthening (``shooting.segment_shift``) measures the bias the free states leave, and
+   widens the intervals.
 3. Refinement of the best start at the fine step ``dt`` (a coarse step times contacts to
    within a step: a bias with the jump contact law) and its uncertainty there. That estimate
    is the answer.
@@ -22,7 +24,8 @@
    independent logs: an optimum 0.2 % from the multiple-shooting one with intervals ten times
    narrower that miss the truth).
 5. The verdict: the optimum is *confirmed* when the segments' fit reaches the noise level of
-   every channel scaled by its noise estimate (:data:`NOISE_LEVEL_RATIO`), no parameter sits on
+   every channel scaled by its noise estimate (within :data:`CONFIRM_RATIO`; the reasons
+   name the channel and the time ranges where it fails), no parameter sits on
    a bound, and at least two of the starts that ran to the end agree (within the estimate's
    interval half-widths: a minimum that fits to the noise level can still be a wrong one,
    measured on an independent multisine log at kL -5 %). Otherwise every parameter is
@@ -51,6 +54,13 @@ from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_cluster
 from ema_cli.identify.whole_log import polish
 
 NOISE_LEVEL_RATIO = 2.0  # a channel fits when its residual RMS is within this x its noise [-]
+CONFIRM_RATIO = 1.2
+"""An optimum is confirmed only when the segments fit every channel scaled by its noise
+estimate within this x its noise [-]. The right model at its optimum leaves the noise (ratio
+near 1: on the independent battery's logs of the model's own contact laws the fits that were
+right ended at 0.97-1.09); a model that leaves 20 % more than the noise explains the log only
+approximately, and its parameters absorb the difference (measured: Hunt-Crossley logs fitted
+without that law confirmed at 1.33 and 1.78 x with kL -9 % and +21 %)."""
 AT_NOISE_RATIO = 1.1
 """A fit whose every channel (scaled by its noise estimate) is within this x its noise is at
 the noise level (said in the verdict's reason; it does not confirm the optimum alone)."""
@@ -71,7 +81,9 @@ class ShootingOutcome:
     confirmed: bool = False
     reasons: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    stage_iterations: dict[str, int] = field(default_factory=dict)  # LM iterations per stage
     step_shift: np.ndarray | None = None  # estimate at dt/2 minus at dt (SI)
+    segment_shift: np.ndarray | None = None  # estimate's move at the last lengthening (SI)
 
     def to_json(self) -> dict[str, Any]:
         s = self.search
@@ -90,9 +102,12 @@ class ShootingOutcome:
             "estimate_from": self.source, "polish": self.polish,
             "step_shift": None if self.step_shift is None else dict(zip(
                 names, map(float, self.step_shift), strict=True)),
+            "segment_shift": None if self.segment_shift is None else dict(zip(
+                names, map(float, self.segment_shift), strict=True)),
             "optimum_confirmed": self.confirmed, "not_confirmed_because": self.reasons,
             "kernel_steps": int(s.sp.kernel_steps), "kernel_s": float(s.sp.kernel_s),
             "timings_s": {**s.timings, **self.timings},
+            "stage_iterations": self.stage_iterations,
         }
 
 
@@ -103,9 +118,35 @@ def channel_ratios(problem: ClosedLoopProblem, r: np.ndarray) -> dict[str, float
             for j, c in enumerate(problem.channels)}
 
 
-def too_high(ratios: dict[str, float], notes: dict[str, str]) -> dict[str, float]:
-    """The channels scaled by their noise estimate whose ratio exceeds the noise level."""
-    return {c: v for c, v in ratios.items() if notes[c] == NOISE_NOTE and v > NOISE_LEVEL_RATIO}
+def too_high(ratios: dict[str, float], notes: dict[str, str],
+             limit: float = NOISE_LEVEL_RATIO) -> dict[str, float]:
+    """The channels scaled by their noise estimate whose ratio exceeds ``limit``."""
+    return {c: v for c, v in ratios.items() if notes[c] == NOISE_NOTE and v > limit}
+
+
+def worst_windows(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray, channel: str,
+                  k: int = 2) -> list[tuple[float, float, float]]:
+    """The ``k`` windows (the search's segments, starting at samples ``first``) where the
+    weighted residuals ``r`` of ``channel`` are largest -> (t0 [s], t1 [s], RMS ratio [-])."""
+    n = problem.log.n
+    j = problem.channels.index(channel)
+    rc = r[j * n:(j + 1) * n]
+    edges = [*first.tolist(), n]
+    t = problem.log.t
+    out = [(float(t[a]), float(t[min(b, n - 1)]), float(np.sqrt(np.mean(rc[a:b] ** 2))))
+           for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
+    return sorted(out, key=lambda w: -w[2])[:k]
+
+
+def mismatch_text(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray,
+                  high: dict[str, float]) -> str:
+    """Each channel of ``high`` with its ratio and the time ranges where it fits worst."""
+    parts = []
+    for c, v in high.items():
+        w = worst_windows(problem, first, r, c)
+        parts.append(f"{c} {v:.3g} x its noise estimate, worst at " + ", ".join(
+            f"t = {a:.3g}-{b:.3g} s ({q:.3g} x)" for a, b, q in w))
+    return "; ".join(parts)
 
 
 def ms_uncertainty(res: ShootingSearch, dt: float) -> tuple[Uncertainty, np.ndarray]:
@@ -128,28 +169,31 @@ def ms_uncertainty(res: ShootingSearch, dt: float) -> tuple[Uncertainty, np.ndar
 LENGTHEN_ITER = 20  # joint LM iterations at each longer segment length
 
 
-def continue_at(res: ShootingSearch, dt: float, iterations: int) -> None:
-    """Continue the best start at step ``dt`` [s] (in place): re-seated, then joint LM."""
+def continue_at(res: ShootingSearch, dt: float, iterations: int) -> int:
+    """Continue the best start at step ``dt`` [s] (in place): re-seated, then joint LM ->
+    the LM iterations used."""
     st = new_state(res.sp, res.V[None], dt)
     st.V, st.R, st.cost = chain_seat(res.sp, st.V, dt)
     lm_many(res.sp, st, dt, iterations)
     res.V, res.cost = st.V[0].copy(), float(st.cost[0])
     res.x = res.sp.unpack(res.V)[0]
+    return int(st.iterations[0])
 
 
-def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -> None:
+def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -> int:
     """Continue the search's best start on segments of ``length`` [s] (in place): each new
     segment starts from the state of the old segment that started at the same sample (the
     nearest before it), chained (:func:`chain_seat`), then joint LM. Kept only if the data
     cost per sample does not rise by more than 5 %: longer segments leave fewer free states
     (with one state per 0.05 s the estimator of the parameters is biased on some logs: the
-    incidental-parameter problem), but a longer horizon is harder to seat."""
+    incidental-parameter problem), but a longer horizon is harder to seat. Returns the LM
+    iterations used."""
     from ema_cli.identify.shooting import ShootingProblem, make_segments
 
     sp = res.sp
     seg = make_segments(sp.base.log.t, length)
     if seg.n >= sp.seg.n:
-        return
+        return 0
     sp2 = ShootingProblem(sp.base, seg, sp.sigma)
     x, S = sp.unpack(res.V)
     k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
@@ -160,6 +204,7 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -
         res.sp, res.V, res.cost = sp2, st.V[0].copy(), float(st.cost[0])
         res.x = sp2.unpack(res.V)[0]
         res.lengths.append(length)
+    return int(st.iterations[0])
 
 
 def on_bound(problem: ClosedLoopProblem, x: np.ndarray) -> list[str]:
@@ -179,16 +224,22 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     res = search(problem, n_starts=n_starts, segment_s=segment_s, dt=dt_search, seed=seed,
                  max_iter=max_iter, report=report)
     timings: dict[str, float] = {}
+    iters: dict[str, int] = {"search": res.iterations}
     t0 = time.perf_counter()
     # the runner-up goes the same way, so that the agreement compares like with like
     runner = None
     if res.final_V is not None and len(res.final_V) > 1:
         runner = dataclasses.replace(res, V=res.final_V[1].copy(), x=res.final_x[1].copy(),
                                      cost=float(res.final_cost[1]), lengths=[])
+    seg_shift = np.zeros_like(res.x)
     for length in lengthen:  # longer segments from the optimum: fewer free states
         if report:
             report(f"segments of {length:g} s", 0, 1)
-        lengthened(res, length, dt_search, LENGTHEN_ITER)
+        x_before, kept = res.x.copy(), len(res.lengths)
+        iters[f"lengthen_{length:g}_s"] = lengthened(res, length, dt_search,
+                                                       LENGTHEN_ITER)
+        if len(res.lengths) > kept:
+            seg_shift = res.x - x_before
         if runner is not None:
             lengthened(runner, length, dt_search, LENGTHEN_ITER)
     x_best_coarse = res.x.copy()
@@ -199,7 +250,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     if fine < dt_search and refine_iter > 0:  # the coarse step's bias off (contact timing)
         if report:
             report(f"refining at dt = {fine:g} s", 0, 1)
-        continue_at(res, fine, refine_iter)
+        iters["refine"] = continue_at(res, fine, refine_iter)
     timings["refine_s"] = time.perf_counter() - t0
     # the step's own error: the same refinement at half the step; the estimate is the half
     # step's, its intervals widened by how far it moved (a fixed step times each contact to
@@ -210,13 +261,17 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     if step_check_iter > 0:
         if report:
             report(f"step check at dt = {half:g} s", 0, 1)
-        continue_at(res, half, step_check_iter)
+        iters["step_check"] = continue_at(res, half, step_check_iter)
     shift = res.x - x_step
     timings["step_check_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     unc_ms, r_ms = ms_uncertainty(res, half if step_check_iter > 0 else min(fine, dt_search))
-    unc_ms.ci_low = unc_ms.ci_low - np.abs(shift)
-    unc_ms.ci_high = unc_ms.ci_high + np.abs(shift)
+    # widened by the method's own errors, which no noise model covers: the step's (above) and
+    # the free segment states' (the incidental-parameter bias: the move at the last
+    # lengthening, about the bias left when the number of free states halves)
+    widen = np.abs(shift) + np.abs(seg_shift)
+    unc_ms.ci_low = unc_ms.ci_low - widen
+    unc_ms.ci_high = unc_ms.ci_high + widen
     ratios = channel_ratios(problem, r_ms)
     timings["ms_uncertainty_s"] = time.perf_counter() - t0
     reasons = []
@@ -237,16 +292,25 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                        "may have missed a better optimum (try more starts)"
                        + ("" if at_noise else f", and the fit is above the noise level "
                           f"(> {AT_NOISE_RATIO:g} x)"))
+    first = res.sp.seg.first
     if high:
-        reasons.append("the segments do not fit the log to its noise level (" + ", ".join(
-            f"{c} {v:.3g} x its noise estimate" for c, v in high.items()) + "): a local "
-            "minimum or a model that cannot explain the log")
+        reasons.append("the segments do not fit the log to its noise level (" + mismatch_text(
+            problem, first, r_ms, high) + "): a local minimum or a model that cannot explain "
+            "the log there")
+    else:
+        loose = too_high(ratios, notes, CONFIRM_RATIO)
+        if loose:
+            reasons.append(f"the segments fit the log only to within {NOISE_LEVEL_RATIO:g} x "
+                           f"its noise, not {CONFIRM_RATIO:g} x (" + mismatch_text(
+                               problem, first, r_ms, loose) + "): the model explains the log "
+                           "only approximately there, and the parameters absorb the rest")
     edge = [n for n in on_bound(problem, res.x) if n not in nuisance]
     if edge:
         reasons.append(f"{', '.join(edge)} on a bound of the search: widen the bounds")
     out = ShootingOutcome(res, res.x.copy(), unc_ms, ratios, res.x.copy(), "multiple shooting",
                           confirmed=not reasons, reasons=reasons, timings=timings,
-                          step_shift=shift)
+                          step_shift=shift, segment_shift=seg_shift,
+                          stage_iterations=iters)
     if polish_iter <= 0:
         out.polish = {"kept": False, "why": "no polish (polish: false)"}
         return out

@@ -205,6 +205,10 @@ def state_starts(sp: ShootingProblem, x: np.ndarray, recs: list[np.ndarray]) -> 
 RESEAT_RATIO = 1.5  # re-seat the segments whose cost exceeds this x the median segment's [-]
 LM_TRIES = 8  # damping increases per LM iteration before a start is declared converged
 LM_UP, LM_DOWN = 10.0, 5.0  # damping factors after a rejected / accepted step [-]
+GN_LAMBDA = 1e-3  # a step with at most this Marquardt damping is nearly Gauss-Newton [-]
+CHI2_TOL = 0.01
+"""A start has converged when a nearly Gauss-Newton step lowers its cost by less than this
+many residuals' worth (chi-square units at the noise level) [-]."""
 
 
 @dataclass
@@ -267,15 +271,19 @@ def reseat(sp: ShootingProblem, st: LMState, dt: float, which: np.ndarray,
 
 
 def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
-            reseat_every: int = 5, tol: float = 1e-9,
+            reseat_every: int = 5, tol: float = 1e-9, chi2_tol: float = CHI2_TOL,
             progress: Any = None) -> LMState:
     """Levenberg-Marquardt on the free parameters and every segment state together, for all
     active starts at once: per iteration ONE kernel call for all their Jacobians and one per
     round of trial steps (each start with its own damping, Marquardt's diagonal scaling;
     parameters clipped to their bounds). Every ``reseat_every`` iterations the segment
     states are re-seated (:func:`reseat`). A start stops when no damping lowers its cost or
-    its relative decrease is below ``tol``."""
+    its relative decrease is below ``tol``, or when a nearly Gauss-Newton step (damping at
+    most :data:`GN_LAMBDA`) lowers it by less than ``chi2_tol`` residuals' worth (``chi2_tol
+    * cost / n_residuals``: with residuals at the noise level, ``chi2_tol`` in chi-square
+    units, a tenth of a standard error from the optimum of the local quadratic model)."""
     p = sp.p
+    n_res = max(sp.base.measured.size, 1)
     lo = np.concatenate([np.zeros(p), np.full(sp.n_vars - p, -np.inf)])
     hi = np.concatenate([np.ones(p), np.full(sp.n_vars - p, np.inf)])
     for it in range(1, max_iter + 1):
@@ -313,9 +321,10 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
                 i = act[q]
                 if ct[k] < st.cost[i]:
                     rel = (st.cost[i] - ct[k]) / max(st.cost[i], 1e-300)
+                    lam_was = st.lam[i]
                     st.V[i], st.R[i], st.cost[i] = trials[k], Rt[k], ct[k]
                     st.lam[i] = max(st.lam[i] / LM_DOWN, 1e-12)
-                    if rel < tol:
+                    if rel < tol or (lam_was <= GN_LAMBDA and rel * n_res < chi2_tol):
                         st.active[i] = False
                 else:
                     st.lam[i] *= LM_UP

@@ -30,8 +30,8 @@ MAKE_DATA_PLANT = {"alpha": 0.003, "friction": 1.0, "sigma2": 1.0e-4}
 vs 1 rad/s, sigma0 1e3*Fc): half backlash 3 mrad, LuGre friction on, viscous 1e-4 N*m*s/rad."""
 LOG_CHANNELS = ("theta_load_deg", "omega_motor_rpm", "current_a", "voltage_cmd_v")
 """The measured channels a closed-loop log may carry (edge columns of ``ema simulate``)."""
-TRUTH_NAMES = ("kL", "alpha", "zeta_t", "c", "contact_tau", "Fc", "Fs", "vs", "delta", "sigma0",
-               "sigma1", "sigma2", "Jm", "JL", "bL")
+TRUTH_NAMES = ("kL", "alpha", "zeta_t", "c", "contact_tau", "contact_hc", "Fc", "Fs", "vs",
+               "delta", "sigma0", "sigma1", "sigma2", "Jm", "JL", "bL")
 """The parameters whose truths a synthetic log states."""
 
 

@@ -36,6 +36,7 @@ class Param:
 DAMPING_CHOICES = {"contact": 0.0, "paper": 1.0}
 """Transmission damping forms: 0 = contact (T never pulls, 0 inside the gap), 1 = paper Eq. 2."""
 CONTACT_TAU = 1.0e-4  # contact form: damping ramp-in time at impact (docs/model.md §2) [s]
+CONTACT_PEN = 1.0e-3  # contact form: reference penetration of the Hunt-Crossley share [rad]
 
 PARAMS: tuple[Param, ...] = (
     # armature and motor
@@ -57,6 +58,10 @@ PARAMS: tuple[Param, ...] = (
           choices=DAMPING_CHOICES),
     Param("contact_tau", "s", CONTACT_TAU, "contact form: damping ramp-in time at impact; "
           "damping torque limited to (c/tau)*penetration (0: none, the torque jumps)"),
+    Param("contact_hc", "-", 0.0, "contact form: Hunt-Crossley share h of the damping, 0..1: "
+          "damping coefficient c*((1-h) + h*penetration/contact_pen) (0: linear damping)"),
+    Param("contact_pen", "rad", CONTACT_PEN, "contact form: penetration at which the "
+          "Hunt-Crossley share's damping coefficient equals c"),
     # controllers
     Param("Kpp", "1/s", 50.0, "position P gain (w*_L = Kpp*e_theta)"),
     Param("Kps", "V*s/rad", 0.15, "speed PI proportional gain (motor side)"),
@@ -192,6 +197,10 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
     for name in ("m", "Jm", "JL", "L"):
         if not values[name]:
             raise EmaError(f"parameter '{name}' must be > 0, got {values[name]}")
+    if values["contact_hc"] > 1.0:  # type: ignore[operator]
+        raise EmaError(f"parameter 'contact_hc' must be in [0, 1] (-), got {values['contact_hc']}")
+    if not values["contact_pen"]:
+        raise EmaError(f"parameter 'contact_pen' must be > 0 (rad), got {values['contact_pen']}")
     if values["Fs"] is None:
         values["Fs"] = FS_PER_FC * values["Fc"]  # type: ignore[operator]
     if values["sigma0"] is None:

@@ -21,19 +21,26 @@ def inverse_tau(tau: float) -> float:
     return 1.0 / tau if tau > 0.0 else math.inf
 
 
+def hc_gain(hc: float, pen_ref: float) -> float:
+    """``h/contact_pen`` [1/rad] for :func:`shaft_torque_nb` (0 when ``h = 0``)."""
+    return hc / pen_ref if hc > 0.0 else 0.0
+
+
 @njit(cache=True, forceinline=True, error_model="numpy")
-def shaft_torque_nb(kL, alpha, c, contact, inv_tau, dth, dw):
+def shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw):
     """Transmission torque T [N*m, load side] for deflection ``dth`` [rad] and rate ``dw`` [rad/s].
 
     ``dth = theta_m/m - theta_L``, ``dw = w_m/m - w_L`` (load side); ``kL`` [N*m/rad],
     ``alpha`` half backlash [rad], ``c`` [N*m*s/rad], ``contact`` True for the contact form,
     ``inv_tau`` = 1/tau [1/s] of the contact form's damping ramp-in time ``tau``
-    (:func:`inverse_tau`; ``inf``: tau = 0)::
+    (:func:`inverse_tau`; ``inf``: tau = 0), ``hc`` the Hunt-Crossley share ``h`` of the
+    contact form's damping [-] and ``hck = h/contact_pen`` [1/rad] (:func:`hc_gain`)::
 
         paper form:    T = kL*DZ(dth, alpha) + c*dw                       (paper Eq. 2)
         contact form:  T = 0 inside the gap (|dth| <= alpha); in contact, with the penetration
                        pen = |dth| - alpha > 0,
-                           T = kL*DZ(dth, alpha) + c*clip(dw, -pen/tau, +pen/tau),
+                           T = kL*DZ(dth, alpha) + c*g*clip(dw, -pen/tau, +pen/tau),
+                       g = (1 - h) + h*pen/contact_pen   (1 with h = 0),
                        clamped so that it pushes but never pulls: max(T, 0) if dth > alpha,
                        min(T, 0) if dth < -alpha.
 
@@ -41,7 +48,10 @@ def shaft_torque_nb(kL, alpha, c, contact, inv_tau, dth, dw):
     ``c*dw`` once the penetration exceeds ``|dw|*tau``, i.e. about ``tau`` after an impact at
     any closing speed (a damper acting through a contact compliance of stiffness c/tau). So
     the torque is continuous at contact and the trajectory is continuous in the parameters.
-    ``tau = 0`` (``inv_tau = inf``) is the jump form: T jumps by c*dw at contact. With
+    ``tau = 0`` (``inv_tau = inf``) is the jump form: T jumps by c*dw at contact. The
+    Hunt-Crossley share (``h`` > 0) makes the damping grow with the penetration, 0 at first
+    touch: with ``h = 1`` and ``tau = 0``, ``T = kL*pen*(1 + lam*dpen/dt)``, ``lam =
+    c/(kL*contact_pen)`` (Hunt and Crossley 1975, linear spring). With
     ``alpha = 0`` both forms are the permanent-contact shaft ``T = kL*dth + c*dw`` (no tau).
     Branch-free (selects), so it vectorises.
     """
@@ -51,23 +61,26 @@ def shaft_torque_nb(kL, alpha, c, contact, inv_tau, dth, dw):
     # tau = 0 the limit is pen*inf = inf and the clip returns dw exactly; outside contact the
     # limit is not used
     lim = (abs(dth) - alpha) * inv_tau
-    tc = spring + c * min(max(dw, -lim), lim)
+    g = (1.0 - hc) + hck * (abs(dth) - alpha)
+    tc = spring + c * g * min(max(dw, -lim), lim)
     clamped = max(tc, 0.0) if dth > alpha else (min(tc, 0.0) if dth < -alpha else 0.0)
     return clamped if (contact and alpha > 0.0) else t
 
 
 @njit(cache=True, error_model="numpy")
-def shaft_torque_array_nb(kL, alpha, c, contact, inv_tau, dth, dw, out):
+def shaft_torque_array_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw, out):
     """:func:`shaft_torque_nb` over arrays ``dth[n]``, ``dw[n]`` into ``out[n]`` [N*m]."""
     for i in range(dth.shape[0]):
-        out[i] = shaft_torque_nb(kL, alpha, c, contact, inv_tau, dth[i], dw[i])
+        out[i] = shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth[i], dw[i])
 
 
 def shaft_torque(dth: np.ndarray, dw: np.ndarray, kL: float, alpha: float, c: float,
-                 form: str, tau: float = 0.0) -> np.ndarray:
+                 form: str, tau: float = 0.0, hc: float = 0.0,
+                 pen_ref: float = 1.0e-3) -> np.ndarray:
     """Transmission torque [N*m] for arrays of deflection [rad] and rate [rad/s]; ``form`` is
     ``contact`` or ``paper``, ``tau`` [s] the contact form's damping ramp-in time (0: none,
-    the jump form; see :func:`shaft_torque_nb`)."""
+    the jump form), ``hc`` the Hunt-Crossley share of the damping [-] and ``pen_ref`` its
+    reference penetration [rad] (see :func:`shaft_torque_nb`)."""
     if form not in FORMS:
         raise ValueError(f"form must be one of {FORMS}, got {form!r}")
     if not tau >= 0.0:
@@ -76,5 +89,6 @@ def shaft_torque(dth: np.ndarray, dw: np.ndarray, kL: float, alpha: float, c: fl
     dw = np.ascontiguousarray(dw, dtype=np.float64)
     out = np.empty_like(dth)
     shaft_torque_array_nb(float(kL), float(alpha), float(c), form == "contact",
-                          inverse_tau(float(tau)), dth.ravel(), dw.ravel(), out.ravel())
+                          inverse_tau(float(tau)), float(hc), hc_gain(float(hc), float(pen_ref)),
+                          dth.ravel(), dw.ravel(), out.ravel())
     return out

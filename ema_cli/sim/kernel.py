@@ -84,7 +84,7 @@ from ema_cli.sim.tables import MET, N_METRICS, N_SIGNALS, SIG
 _R, _L, _KT, _KE = INDEX["R"], INDEX["L"], INDEX["Kt"], INDEX["Ke"]
 _JM, _BM, _M, _JL, _BL = INDEX["Jm"], INDEX["bm"], INDEX["m"], INDEX["JL"], INDEX["bL"]
 _KL, _C, _ALPHA, _DAMP = INDEX["kL"], INDEX["c"], INDEX["alpha"], INDEX["damping"]
-_TAU = INDEX["contact_tau"]
+_TAU, _HC, _PEN = INDEX["contact_tau"], INDEX["contact_hc"], INDEX["contact_pen"]
 _KPP, _KPS, _KIS = INDEX["Kpp"], INDEX["Kps"], INDEX["Kis"]
 _SAT1, _SAT2, _SAT3 = INDEX["sat1"], INDEX["sat2"], INDEX["sat3"]
 _D1, _D3, _D4 = INDEX["d1"], INDEX["d3"], INDEX["d4"]
@@ -151,11 +151,11 @@ _D0 = _P0 + N_PARAMS
 # 1/m, 1/L, 1/Jm, 1/JL, contact form?, steps per controller sample, sample countdown, held
 # voltage, running?, step it diverged at, is the input a step?, step size, step time, 1/q_pos,
 # 1/q_speed, notch: w and output gain, notch states x1, x2, friction observer's bristle state,
-# 1/contact_tau (inf: none)
+# 1/contact_tau (inf: none), contact_hc/contact_pen
 (_D_INVM, _D_INVL, _D_INVJM, _D_INVJL, _D_CONTACT, _D_NS, _D_CNT, _D_UH, _D_ALIVE, _D_KEND,
  _D_ISSTEP, _D_STEP, _D_TSTEP, _D_INVQP, _D_INVQS, _D_NW, _D_NC, _D_XN1,
- _D_XN2, _D_ZH, _D_INVTAU) = range(_D0, _D0 + 21)
-_X0 = _D0 + 21
+ _D_XN2, _D_ZH, _D_INVTAU, _D_HCK) = range(_D0, _D0 + 22)
+_X0 = _D0 + 22
 _X_THM, _X_WM, _X_I = (_X0 + STATE_INDEX[k] for k in ("theta_m", "w_m", "i"))
 _X_THL, _X_WL = _X0 + STATE_INDEX["theta_L"], _X0 + STATE_INDEX["w_L"]
 _X_Z, _X_XI = _X0 + STATE_INDEX["z"], _X0 + STATE_INDEX["xI"]
@@ -192,7 +192,7 @@ def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, l
     (m, inv_m, inv_l, inv_jm, inv_jl, r_a, kt, ke, bm, bl, kl, alpha, c, contact, kpp, kps, kis,
      sat1, sat2, sat3, d1, d3, d4, q_pos, q_speed, t_const, k_h, _, _, _, _, delta, _, _, _, _,
      _, _, _, _, _, inv_qp, inv_qs, fb, dzi, dzib, ffc, ffs, ffv, ffs2, ffb, _, nc, _, ffsig0,
-     _, inv_tau) = prm
+     _, inv_tau, hc, hck) = prm
     if not extras:  # no quantisers (a constant at each call site)
         q_pos = 0.0
         q_speed = 0.0
@@ -208,7 +208,7 @@ def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, l
     if extras:
         u = deadzone_inverse_nb(u, dzi, dzib)
     u_amp = 0.0 if locked else dead_zone_nb(u, d1)
-    t_shaft = shaft_torque_nb(kl, alpha, c, contact, inv_tau, th_m * inv_m - th_l,
+    t_shaft = shaft_torque_nb(kl, alpha, c, contact, inv_tau, hc, hck, th_m * inv_m - th_l,
                               w_m * inv_m - w_l)
     di = armature_rate_nb(i, w_m, u_amp, r_a, inv_l, ke, sat3)
     dxi = 0.0 if disc else integral_rate_nb(e_w, u_unsat, sat2)
@@ -233,7 +233,7 @@ def _lane_params(W, j):
             W[_D_ISSTEP, j] != 0.0, W[_D_STEP, j], W[_D_TSTEP, j], W[_D_INVQP, j],
             W[_D_INVQS, j], W[_FB, j], W[_DZI, j], W[_DZIB, j], W[_FFC, j], W[_FFS, j],
             W[_FFV, j], W[_FFS2, j], W[_FFB, j], W[_D_NW, j], W[_D_NC, j], W[_NZETA, j],
-            W[_FFSIG0, j], W[_FFSIG1, j], W[_D_INVTAU, j])
+            W[_FFSIG0, j], W[_FFSIG1, j], W[_D_INVTAU, j], W[_HC, j], W[_D_HCK, j])
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -309,7 +309,7 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     (m, inv_m, _, _, _, _, _, _, _, _, kl, alpha, c, contact, kpp, kps, kis, sat1, sat2, sat3,
      d1, d3, d4, q_pos, q_speed, t_const, k_h, fr, fc, fs, vs, delta, sig0, sig1, sig2, ns, ts,
      locked, is_step, step, t_step, inv_qp, inv_qs, fb, dzi, dzib, ffc, ffs, ffv, ffs2, ffb, nw,
-     nc, nz, ffsig0, ffsig1, inv_tau) = lp
+     nc, nz, ffsig0, ffsig1, inv_tau, hc, hck) = lp
     th_m, w_m, i, th_l, w_l, z, x_i = x
     (iae, ise, itae, iaev, isev, itaev, emax, evmax, ss, emin_o, emax_o, evmin_o, evmax_o, smax,
      t10, t50, t90, last_out, pki, pku, pkwl, pkt) = acc
@@ -363,7 +363,7 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     if extras:
         u_out = deadzone_inverse_nb(u_out, dzi, dzib)
     u_amp = dead_zone_nb(u_out, d1)
-    t_shaft = shaft_torque_nb(kl, alpha, c, contact, inv_tau, th_m * inv_m - th_l,
+    t_shaft = shaft_torque_nb(kl, alpha, c, contact, inv_tau, hc, hck, th_m * inv_m - th_l,
                               w_m * inv_m - w_l)
     # --- metrics (trapezoid weights over the full-resolution samples)
     e = r0 - th_l
@@ -490,6 +490,7 @@ def _init(W, n_real, step_info, qidx, dt, n_steps):
         W[_D_INVJL, j] = 1.0 / W[_JL, j]
         W[_D_CONTACT, j] = 1.0 if W[_DAMP, j] == 0.0 else 0.0
         W[_D_INVTAU, j] = 1.0 / W[_TAU, j] if W[_TAU, j] > 0.0 else _INF
+        W[_D_HCK, j] = W[_HC, j] / W[_PEN, j] if W[_HC, j] > 0.0 else 0.0
         W[_D_INVQP, j] = 1.0 / W[_QPOS, j] if W[_QPOS, j] > 0.0 else 0.0
         W[_D_INVQS, j] = 1.0 / W[_QSPEED, j] if W[_QSPEED, j] > 0.0 else 0.0
         if W[_NHZ, j] > 0.0:

@@ -69,9 +69,17 @@ def convergence(truth: Mapping[str, float], law: str, excitation: str, duration_
             for c in CHANNELS}
 
 
+EMA_LAW = {"jump": {"contact_tau": 0.0}, "ramp": {"contact_tau": LAW_TAU["ramp"]},
+           "hunt_crossley": {"contact_tau": 0.0, "contact_hc": 1.0,
+                             "contact_pen": odemodel.HC_PEN_REF}}
+"""Each law as ema's parameters: the jump and ramp laws by contact_tau; Hunt-Crossley as
+ema's contact form with its whole damping penetration-proportional (contact_hc = 1) and the
+same reference penetration, so c/(kL*contact_pen) is the generator's lambda."""
+
+
 def ema_run(truth: Mapping[str, float], law: str, cmd, duration_s: float,
             rate_hz: float = 1000.0, dt: float = EMA_DT) -> dict[str, np.ndarray]:
-    """ema's kernel (``ema_cli.sim.runner.simulate``, friction on, contact_tau of the law) on
+    """ema's kernel (``ema_cli.sim.runner.simulate``, friction on, the law's :data:`EMA_LAW`) on
     the command sampled every REF_DT as a ``csv`` reference -> channels at rate_hz."""
     from ema_cli.model.params import resolve as ema_resolve
     from ema_cli.sim.runner import simulate
@@ -80,7 +88,7 @@ def ema_run(truth: Mapping[str, float], law: str, cmd, duration_s: float,
     tf = np.arange(int(round(duration_s / REF_DT)) + 1) * REF_DT
     ref = InputSignal("csv", table=(tuple(tf.tolist()), tuple(cmd.sample(tf).tolist())),
                       path="(loggen command)")
-    pe = ema_resolve({**truth, "friction": 1.0, "contact_tau": LAW_TAU[law]})
+    pe = ema_resolve({**truth, "friction": 1.0, **EMA_LAW[law]})
     res = simulate(pe, ref, duration=duration_s, dt=dt, output_interval=1.0 / rate_hz)
     return {c: np.asarray(res.signal(c, edge=True)) for c in CHANNELS}
 

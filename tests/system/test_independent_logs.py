@@ -43,8 +43,11 @@ def test_converged_far_below_the_noise(law: str) -> None:
 # (and clamps i after each step), where the generator locates both by events. Measured over
 # 0.5 s (theta_load, omega_motor): default jump 9.2e-5, 5.9e-4; ramp 4.4e-6, 6.7e-5;
 # large_alpha jump 8.6e-5, 4.0e-4; ramp 6.9e-6, 4.1e-5; current_limit (ramp) 2.7e-5, 1.5e-4.
+# Hunt-Crossley (ema: contact_hc = 1, contact_tau = 0, contact_pen = the generator's pen_ref):
+# default 5.2e-6, 1.1e-4; large_alpha 3.2e-6, 5.5e-5 (no jump: as close as the ramp law).
 # Tolerances: 3-5x those.
 XCHECK = [("default", "jump", 5e-4, 2e-3), ("default", "ramp", 3e-5, 3e-4),
+          ("default", "hunt_crossley", 3e-5, 4e-4), ("large_alpha", "hunt_crossley", 3e-5, 2e-4),
           ("large_alpha", "jump", 5e-4, 2e-3), ("large_alpha", "ramp", 3e-5, 2e-4),
           ("current_limit", "ramp", 1e-4, 6e-4)]
 

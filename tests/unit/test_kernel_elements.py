@@ -13,7 +13,7 @@ from ema_cli.model.elements import quantize_nb
 from ema_cli.model.elements import saturate_nb as _sat
 from ema_cli.model.lugre import bristle_step_nb, steady_friction_nb
 from ema_cli.model.params import INDEX, resolve, to_row
-from ema_cli.model.transmission import inverse_tau, shaft_torque, shaft_torque_nb
+from ema_cli.model.transmission import hc_gain, inverse_tau, shaft_torque, shaft_torque_nb
 
 
 def row(**over) -> np.ndarray:
@@ -23,7 +23,8 @@ def row(**over) -> np.ndarray:
 def _shaft_torque(p, dth, dw):
     return shaft_torque_nb(p[INDEX["kL"]], p[INDEX["alpha"]], p[INDEX["c"]],
                            p[INDEX["damping"]] == 0.0, inverse_tau(p[INDEX["contact_tau"]]),
-                           dth, dw)
+                           p[INDEX["contact_hc"]],
+                           hc_gain(p[INDEX["contact_hc"]], p[INDEX["contact_pen"]]), dth, dw)
 
 
 def _bristle_step(p, z, w, dt):
@@ -47,9 +48,32 @@ def test_array_torque_equals_scalar_torque():
     for form in ("contact", "paper"):
         for tau in (0.0, 1e-4):
             arr = shaft_torque(dth, dw, 590.0, 0.003, 0.8, form, tau)
-            ref = [shaft_torque_nb(590.0, 0.003, 0.8, form == "contact", inverse_tau(tau), a, b)
-                   for a, b in zip(dth, dw, strict=True)]
+            ref = [shaft_torque_nb(590.0, 0.003, 0.8, form == "contact", inverse_tau(tau),
+                                   0.0, 0.0, a, b) for a, b in zip(dth, dw, strict=True)]
             assert np.array_equal(arr, np.array(ref))
+
+
+def test_hunt_crossley_share():
+    # h = 1, tau = 0: T = kL*pen*(1 + lam*dpen/dt), lam = c/(kL*pen_ref), pushing only; both
+    # contact sides (dpen/dt = +dw above the gap, -dw below); h = 0.5 halfway; h = 0 exact
+    kL, a, c, pr = 590.0, 0.003, 0.8, 1e-3
+    lam = c / (kL * pr)
+    for dth, dw in ((0.0045, 0.3), (0.0045, -0.3), (-0.0052, -0.4), (-0.0052, 0.2)):
+        pen = abs(dth) - a
+        dpen = dw if dth > 0 else -dw
+        hc = math.copysign(1.0, dth) * max(kL * pen * (1.0 + lam * dpen), 0.0)
+        lin = math.copysign(1.0, dth) * max(kL * pen + c * dpen, 0.0)
+        got = shaft_torque(np.array([dth]), np.array([dw]), kL, a, c, "contact", 0.0, 1.0, pr)
+        assert got[0] == pytest.approx(hc, rel=1e-12)
+        half = shaft_torque(np.array([dth]), np.array([dw]), kL, a, c, "contact", 0.0, 0.5, pr)
+        g = 0.5 + 0.5 * pen / pr
+        ref = math.copysign(1.0, dth) * max(kL * pen + c * g * dpen, 0.0)
+        assert half[0] == pytest.approx(ref, rel=1e-12)
+        zero = shaft_torque(np.array([dth]), np.array([dw]), kL, a, c, "contact", 0.0, 0.0, pr)
+        assert zero[0] == lin or zero[0] == pytest.approx(lin, rel=1e-15)
+    # continuous at contact entry: at pen -> 0 the HC torque -> 0 whatever the closing speed
+    tiny = shaft_torque(np.array([a + 1e-12]), np.array([5.0]), kL, a, c, "contact", 0.0, 1.0)
+    assert abs(tiny[0]) < 1e-8
 
 
 @pytest.mark.parametrize(("u", "d", "expected"), [
