@@ -133,7 +133,7 @@ def worst_windows(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray, 
     rc = r[j * n:(j + 1) * n]
     edges = [*first.tolist(), n]
     t = problem.log.t
-    out = [(float(t[a]), float(t[min(b, n - 1)]), float(np.sqrt(np.mean(rc[a:b] ** 2))))
+    out = [(float(t[a]), float(t[b - 1]), float(np.sqrt(np.mean(rc[a:b] ** 2))))
            for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
     return sorted(out, key=lambda w: -w[2])[:k]
 

@@ -198,6 +198,9 @@ def test_unknown_parameter_lists_the_names():
     ({"locked": 0.5}, r"'locked' must be 0/off or 1/on"),
     ({"friction": 1, "Fc": 0}, r"LuGre friction needs Fc > 0 and vs > 0"),
     ({"friction": 1, "vs": 0}, r"LuGre friction needs Fc > 0 and vs > 0"),
+    ({"contact_hc": 1.5}, r"'contact_hc' must be in \[0, 1\] \(-\), got 1.5"),
+    ({"contact_hc": -0.1}, r"'contact_hc' must be >= 0"),
+    ({"contact_pen": 0}, r"'contact_pen' must be > 0 \(rad\)"),
 ])
 def test_resolve_refuses(over, match):
     with pytest.raises(EmaError, match=match):

@@ -137,5 +137,39 @@ def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
                                   profile_points=5)
     js = run_closed_loop(settings, _log(syn)).to_json()
     assert js["optimum"]["confirmed"] is False
-    assert any("noise level" in r for r in js["optimum"]["not_confirmed_because"])
+    why = js["optimum"]["not_confirmed_because"]
+    assert any("noise level" in r and "worst at t = " in r for r in why), why
     assert set(js["not_determined"]) == {"kL", "alpha", "Fc", "sigma2"}
+
+
+def test_the_worst_windows_are_where_the_residuals_are():
+    """The verdict names where a channel fits worst: residuals of 1 everywhere, 3 on the
+    samples of the third 0.2 s window of the current: that window first, at 3x."""
+    from ema_cli.identify.shooting import make_segments
+    from ema_cli.identify.shooting_fit import mismatch_text, worst_windows
+
+    syn = closed_loop_log({}, 1.0, 0, duration_s=1.0)
+    problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
+    n = problem.log.n
+    first = make_segments(problem.log.t, 0.2).first
+    r = np.ones(problem.measured.size)
+    j = problem.channels.index("current_a")
+    r[j * n + first[2]:j * n + first[3]] = 3.0
+    w = worst_windows(problem, first, r, "current_a")
+    t = problem.log.t
+    assert w[0][:2] == (pytest.approx(t[first[2]]), pytest.approx(t[first[3] - 1]))
+    assert w[0][2] == pytest.approx(3.0) and w[1][2] == pytest.approx(1.0)
+    text = mismatch_text(problem, first, r, {"current_a": 1.5})
+    assert text.startswith("current_a 1.5 x its noise estimate, worst at t = 0.4-0.6 s (3 x)")
+
+
+@pytest.mark.parametrize(("plant", "freed"), [
+    ({}, {"zeta_t", "contact_tau", "contact_hc"}),
+    ({"contact_tau": 0.0}, {"zeta_t"}),  # the jump law stated: no Hunt-Crossley share either
+    ({"contact_hc": 1.0}, {"zeta_t"}),
+    ({"zeta_t": 0.3}, {"contact_tau", "contact_hc"}),
+])
+def test_stating_the_contact_law_fixes_its_shape(plant, freed):
+    syn = closed_loop_log({}, 1.0, 0, duration_s=0.2)
+    problem, _ = build_problem(ClosedLoopSettings(plant=plant), _log(syn))
+    assert set(problem.names) - {"kL", "alpha", "Fc", "sigma2"} == freed
