@@ -29,6 +29,7 @@ from ema_cli.api.identify_logs import (
     make_identification_data,
 )
 from ema_cli.api.margins import LoopMargins, margins
+from ema_cli.api.reproduce import ReproduceResult, reproduce
 from ema_cli.api.sensitivity import Sensitivity, sensitivity
 from ema_cli.api.simulation import Simulation, simulate
 from ema_cli.api.study import Sweep, sweep
@@ -37,9 +38,11 @@ from ema_cli.api.tune import TuneResult, tune
 from ema_cli.errors import EmaError
 
 __all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
-           "FrictionSweepIdentification", "Identification", "LoopMargins", "Sensitivity",
+           "FrictionSweepIdentification", "Identification", "LoopMargins", "ReproduceResult",
+           "Sensitivity",
            "Simulation", "Sweep", "SyntheticData", "Threshold", "TuneResult", "acceptance",
            "freqresp",
            "identify", "identify_closed_loop", "identify_friction_sweep",
-           "make_identification_data", "margins", "sensitivity", "simulate", "sweep",
+           "make_identification_data", "margins", "reproduce", "sensitivity", "simulate",
+           "sweep",
            "threshold", "tune"]

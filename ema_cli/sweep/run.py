@@ -2,9 +2,10 @@
 
 ``compute_sweep`` returns a :class:`SweepResult`: the metrics table (one row per job) and
 access to each job's decimated time series. It writes nothing but the job cache (and only when
-given one); the output folder is written by ``report.sweep_report.run_sweep`` (the library entry
-point of ``ema sweep`` and of the paper reproduction) through the ``on_start`` /
-``on_signals`` / ``on_finish`` hooks.
+given one); ``api.study.run_sweep`` (the one route of ``ema sweep`` and of the paper
+reproduction) plans the config once and hands this the plan and the output folder's sink
+(``report.sweep_report.SweepFolder``) as the ``on_start`` / ``on_signals`` / ``on_finish``
+hooks.
 """
 
 from __future__ import annotations
@@ -231,7 +232,7 @@ class _Progress:
 
 
 def compute_sweep(
-    cfg: StudyConfig,
+    plan: Plan | StudyConfig,
     n_jobs: int | None = None,
     backend: str | None = None,
     force: bool = False,
@@ -249,7 +250,8 @@ def compute_sweep(
 ) -> SweepResult:
     """Run every job of a sweep (finished ones from the cache) and return the result.
 
-    cfg        validated StudyConfig (``load_config(path, overrides, StudyConfig)``)
+    plan       the resolved sweep (``sweep.plan.plan_sweep``: jobs, parameter rows, the sampled
+               reference), or a validated StudyConfig, planned here with ``base_dir``/``source``
     n_jobs     workers; None: ``cfg.parallel.n_jobs`` (None there: all cores); the dask
                backend uses every thread of the cluster instead
     backend    auto | loky | threads | dask; None: ``cfg.parallel.backend``
@@ -285,7 +287,10 @@ def compute_sweep(
     t_start = time.perf_counter()
     timings: dict[str, float] = dict.fromkeys(
         ("lookup", "warm", "execute", "kernel", "store", "signals", "writes"), 0.0)
-    plan = plan_sweep(cfg, base_dir, source)
+    if not isinstance(plan, Plan):
+        plan = plan_sweep(plan, base_dir, source)
+    cfg = plan.cfg
+    reference = plan.reference if plan.reference is not None else plan.signal
     timings["plan"] = time.perf_counter() - t_start
     workers = resolve_workers(n_jobs if n_jobs is not None else cfg.parallel.n_jobs)
     backend = resolve_backend(backend or cfg.parallel.backend, workers)
@@ -414,10 +419,10 @@ def compute_sweep(
         bar = _Progress(sum(len(by_key[k]) for k in pending), progress, label)
         with bar:
             if chunks and backend != "dask":
-                timings["warm"] = warm_kernel(plan.signal, plan.dt, 1)  # the prange kernel
+                timings["warm"] = warm_kernel(reference, plan.dt, 1)  # the prange kernel
             t1 = time.perf_counter()
             try:
-                execute(chunks, plan.signal, plan.dt, plan.n_steps, plan.dec, backend, workers,
+                execute(chunks, reference, plan.dt, plan.n_steps, plan.dec, backend, workers,
                         on_chunk, scheduler)
                 tw = time.perf_counter()
                 settle()
