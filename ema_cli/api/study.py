@@ -179,6 +179,19 @@ def run_sweep(
                          keep_signals=not (write and plan.cfg.outputs.timeseries))
 
 
+def plan(config: ConfigSource, overrides: Overrides = None) -> Plan:
+    """The jobs a study config expands to, resolved (``sweep.plan.plan_sweep``: SI parameters,
+    labels, cache keys, the reference), as ``ema show`` lists them; nothing runs but the
+    baseline a relative axis needs."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.study import StudyConfig
+    from ema_cli.sweep.plan import plan_sweep
+
+    pairs = override_pairs(overrides)
+    cfg = load_config(config, pairs, StudyConfig)
+    return plan_sweep(cfg, base_dir(config), source_name(config))
+
+
 def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | None = None,
           backend: str | None = None, force: bool = False, progress: bool = False,
           cache_dir: str | Path | None = None, out: str | Path | None = None,

@@ -166,10 +166,8 @@ def identify_cmd(
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")
-    from ema_cli.api.identification import identify
-    from ema_cli.config.loader import load_config
+    from ema_cli.api.identification import identify, load_settings
     from ema_cli.identify.problem import PARAM_UNITS
-    from ema_cli.identify.settings import IdentifySettings
     from ema_cli.report.rundir import check_output
 
     check_output(out, "identify")
@@ -196,7 +194,7 @@ def identify_cmd(
         pairs.append((f"columns.{name}", col))
     if c is not None and fit_c is None:
         pairs.append(("fit_c", False))  # --c fixes c even if the config asked to fit it
-    settings = load_config(config, pairs, IdentifySettings)
+    settings = load_settings(config, pairs)
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
                        "with --data")

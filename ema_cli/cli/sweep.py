@@ -260,10 +260,10 @@ def show_cmd(
     """Print the resolved config (every default filled in) and the jobs it expands to."""
     import yaml
 
-    from ema_cli.sweep.plan import plan_sweep
+    from ema_cli.api.study import plan as plan_study
 
-    cfg, _ = _load(config, set_)
-    plan = plan_sweep(cfg, config.parent, str(config))
+    plan = plan_study(config, parse_assignments(set_, "--set"))
+    cfg = plan.cfg
     console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip(),
                   markup=False)
     from ema_cli.cli.output import print_table
