@@ -14,9 +14,12 @@ DIGITS = 4  # significant digits of a number in a markdown table [-]
 
 def md_cell(value: Any, digits: int = DIGITS) -> str:
     """One table cell: floats with ``digits`` significant digits (``units.fmt_num``: NaN and
-    None read ``n/a``), booleans and text as they are, ``|`` escaped."""
+    None read ``n/a``), booleans, integers and text as they are (``|`` escaped), a list as
+    its cells joined by commas (``none`` if empty)."""
     if isinstance(value, bool | np.bool_):
         return str(bool(value))
+    if isinstance(value, list | tuple):
+        return ", ".join(md_cell(v, digits) for v in value) or "none"
     if isinstance(value, int | np.integer):
         return str(int(value))
     if value is None or isinstance(value, float | np.floating):

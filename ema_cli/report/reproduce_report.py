@@ -9,9 +9,7 @@ simulates).
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
@@ -23,6 +21,7 @@ from ema_cli.config.base import check_plain_name
 from ema_cli.config.experiment import StudySpec
 from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
+from ema_cli.report.markdown import md_cell, md_table
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
 from ema_cli.report.threshold_figures import threshold_figure
 
@@ -38,20 +37,6 @@ def under(out: Path, *names: str) -> Path:
     for name in names:
         check_plain_name(name, "an output file or folder name")
     return out.joinpath(*names)
-
-
-def _g(x: Any) -> str:
-    if isinstance(x, float):
-        return "n/a" if not math.isfinite(x) else f"{x:.4g}"
-    return str(x)
-
-
-def _md_table(df: pd.DataFrame) -> str:
-    cols = list(df.columns)
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for _, row in df.iterrows():
-        lines.append("| " + " | ".join(_g(row[c]).replace("|", "/") for c in cols) + " |")
-    return "\n".join(lines)
 
 
 def study_figure(rep: Reproduction, spec: StudySpec):
@@ -136,7 +121,7 @@ def sensitivity_section(rep: Reproduction) -> list[str]:
         cols = ["rank", "factor", key, f"{key}_conf", "oat_rank"]
         if key == "ST":
             cols.insert(4, "S1")
-        lines += [f"**Input {inp}, `{metric}`** (first six):", "", _md_table(top[cols]), ""]
+        lines += [f"**Input {inp}, `{metric}`** (first six):", "", md_table(top[cols]), ""]
     mine = table[(table["input"] == spec.input) & (table["metric"] == spec.metric)]
     first = str(mine["factor"].iloc[0])
     rank = int(rep.scalars["sensitivity.paper_first_rank"])
@@ -173,7 +158,7 @@ def render_report(rep: Reproduction, wall: float) -> str:
              "result": ("**PASS**" if v.passed else "**FAIL**") +
                        (f" ({v.error})" if v.error else "")} for v in rep.verdicts]
     if rows:
-        lines += [_md_table(pd.DataFrame(rows)), ""]
+        lines += [md_table(pd.DataFrame(rows)), ""]
     if rep.thresholds:
         lines += ["## Thresholds", "",
                   "Computed by bracketing and bisection on batched simulations "
@@ -188,12 +173,12 @@ def render_report(rep: Reproduction, wall: float) -> str:
             else:
                 verdict = "paper's limit is safe" if t.value <= pv else "paper's limit is too lax"
             rows.append({"threshold": t.spec.id, "paper": t.spec.paper,
-                         "paper value": _g(pv) if pv is not None else "-",
+                         "paper value": md_cell(pv) if pv is not None else "-",
                          "ours": f"{t.value:.4g} {t.unit}",
                          "criterion": "; ".join(map(str, t.criteria)),
                          "bracket": f"[{t.result.bracket[0]:.4g}, {t.result.bracket[1]:.4g}]",
                          "simulations": t.result.n_sims, "comparison": verdict})
-        lines += [_md_table(pd.DataFrame(rows)), ""]
+        lines += [md_table(pd.DataFrame(rows)), ""]
         for t in rep.thresholds:
             if t.tuned is not None and t.tuning is not None:
                 lines += [f"Threshold `{t.spec.id}` runs with the controller tuned by `ema tune "
@@ -211,7 +196,7 @@ def render_report(rep: Reproduction, wall: float) -> str:
         lines += ["## Ranking of the nonlinearities", "",
                   f"Worst ratio of `{exp.ranking.metric}` to the study's baseline at the paper's "
                   f"magnitudes. The paper: {exp.ranking.paper}", "",
-                  _md_table(rep.ranking), ""]
+                  md_table(rep.ranking), ""]
         first = str(rep.ranking["study"].iloc[0])
         agree = "agrees" if first == exp.ranking.paper_first else "differs"
         lines += [f"Our model ranks **{first}** first; the paper names "
@@ -219,7 +204,7 @@ def render_report(rep: Reproduction, wall: float) -> str:
     lines += sensitivity_section(rep)
     if rep.identification is not None:
         lines += ["## Identification (paper §3.1)", ""]
-        lines += [_md_table(pd.DataFrame([{"quantity": k, "value": _g(v)}
+        lines += [md_table(pd.DataFrame([{"quantity": k, "value": md_cell(v)}
                                           for k, v in rep.identification.items()
                                           if not isinstance(v, dict | list)])), ""]
         for f in ("convergence.png", "fit.png"):
@@ -230,5 +215,5 @@ def render_report(rep: Reproduction, wall: float) -> str:
         cols = ["label", *[c for c in FIGURE_METRICS if c in df.columns]]
         lines += [f"### {spec.caption}", "", f"![{spec.id}]({spec.figure})", "",
                   f"*Paper:* {spec.shows}" if spec.shows else "", "",
-                  _md_table(df[cols]), ""]
+                  md_table(df[cols]), ""]
     return "\n".join(lines) + "\n"

@@ -23,7 +23,6 @@ so only the unfinished ones run.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -36,6 +35,7 @@ from ema_cli.config.base import check_plain_name
 from ema_cli.config.sensitivity import SensitivityConfig
 from ema_cli.hashing import content_hash
 from ema_cli.report.figures import subplots
+from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import (
     finish_output,
     manifest,
@@ -146,12 +146,6 @@ def figures(res: SensitivityResult) -> list[tuple[str, Figure]]:
     return out
 
 
-def _g(x: Any, digits: int = 3) -> str:
-    if isinstance(x, float | np.floating):
-        return "n/a" if not math.isfinite(x) else f"{x:.{digits}f}"
-    return str(x)
-
-
 def summary_markdown(res: SensitivityResult, names: Sequence[str]) -> str:
     """summary.md: the study, then per input and metric the factors ranked with their indices,
     the factors without influence, and the figures."""
@@ -183,18 +177,20 @@ def summary_markdown(res: SensitivityResult, names: Sequence[str]) -> str:
             if sobol:
                 lines += ["| rank | factor | ST | ± | S1 | ± |", "|---|---|---|---|---|---|"]
                 for _, row in ranked.iterrows():
-                    lines.append(f"| {row['rank']} | {row['factor']} | {_g(row['ST'])} | "
-                                 f"{_g(row['ST_conf'])} | {_g(row['S1'])} | "
-                                 f"{_g(row['S1_conf'])} |")
+                    lines.append(f"| {row['rank']} | {row['factor']} | {md_cell(row['ST'])} | "
+                                 f"{md_cell(row['ST_conf'])} | {md_cell(row['S1'])} | "
+                                 f"{md_cell(row['S1_conf'])} |")
                 small = ranked[ranked["ST"] < NEGLIGIBLE_ST]["factor"].tolist()
                 lines += ["", f"Without influence (ST < {NEGLIGIBLE_ST}): "
                               f"{', '.join(small) or 'none'}.", ""]
             else:
                 lines += ["| rank | factor | mu* | ± | sigma | mu |", "|---|---|---|---|---|---|"]
                 for _, row in ranked.iterrows():
-                    lines.append(f"| {row['rank']} | {row['factor']} | {_g(row['mu_star'], 4)}"
-                                 f" | {_g(row['mu_star_conf'], 4)} | {_g(row['sigma'], 4)} | "
-                                 f"{_g(row['mu'], 4)} |")
+                    lines.append(f"| {row['rank']} | {row['factor']} | "
+                                 f"{md_cell(row['mu_star'], 4)} | "
+                                 f"{md_cell(row['mu_star_conf'], 4)} | "
+                                 f"{md_cell(row['sigma'], 4)} | "
+                                 f"{md_cell(row['mu'], 4)} |")
                 lines.append("")
         for n in names:
             if n.endswith(f"_{r.name}.png"):
