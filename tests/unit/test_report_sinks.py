@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from ema_cli import api
 from ema_cli.sim import runner
 
-SHORT = {"simulation": {"duration_s": 0.1}}
+SHORT = {"simulation": {"duration_s": 0.05}}
 STEP = {"kind": "step", "amplitude_deg": 1.0}
 
 STUDY = """name: tiny
@@ -89,25 +89,34 @@ def no_kernel(monkeypatch):
     monkeypatch.setattr(runner, "entry_point", _refuse)
 
 
+@pytest.fixture(scope="module")
+def saved(results, tmp_path_factory):
+    """Every result plotted and saved once with the kernel entry raising -> (figures, path)."""
+    out = tmp_path_factory.mktemp("saved")
+    done = {}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(runner, "entry_point", _refuse)
+        for name, res in results.items():
+            figs = res.plot()
+            done[name] = (figs if isinstance(figs, list) else [figs], res.save(out / name))
+    return done
+
+
 def test_the_patch_stops_a_simulation(no_kernel):
     with pytest.raises(KernelCalled):
         api.simulate({**SHORT, "input": STEP})
 
 
 @pytest.mark.parametrize("name", ["simulate", "sweep", "sensitivity", "threshold", "reproduce"])
-def test_save_and_plot_never_simulate(results, name, no_kernel, tmp_path):
-    res = results[name]
-    figs = res.plot()
-    figs = figs if isinstance(figs, list) else [figs]
+def test_save_and_plot_never_simulate(saved, name):
+    figs, path = saved[name]
     assert figs and all(isinstance(f, Figure) for f in figs)
-    saved = res.save(tmp_path / "saved")
-    folder = saved if saved.is_dir() else saved.parent
+    folder = path if path.is_dir() else path.parent
     assert any(folder.iterdir())
 
 
-def test_sweep_folder_holds_the_computed_numbers(results, no_kernel, tmp_path):
-    sw = results["sweep"]
-    folder = sw.save(tmp_path / "sweep")
+def test_sweep_folder_holds_the_computed_numbers(results, saved):
+    sw, (_, folder) = results["sweep"], saved["sweep"]
     back = pd.read_csv(folder / "metrics.csv")
     # metrics.csv is written with %.9g: 9 significant digits, rel 5e-9
     np.testing.assert_allclose(back["iae_pos_deg_s"], sw.metrics["iae_pos_deg_s"], rtol=5e-9)
@@ -121,17 +130,15 @@ def test_sweep_folder_holds_the_computed_numbers(results, no_kernel, tmp_path):
     assert man["status"] == "complete" and man["job_counts"]["total"] == 3
 
 
-def test_sensitivity_folder_holds_the_computed_indices(results, no_kernel, tmp_path):
-    sens = results["sensitivity"]
-    folder = sens.save(tmp_path / "sens")
+def test_sensitivity_folder_holds_the_computed_indices(results, saved):
+    sens, (_, folder) = results["sensitivity"], saved["sensitivity"]
     back = pd.read_csv(folder / "indices.csv")
     np.testing.assert_allclose(back["mu_star"], sens.indices["mu_star"], rtol=5e-9)
 
 
-def test_reproduction_report_from_the_computed_claims(results, no_kernel, tmp_path):
-    rep = results["reproduce"]
+def test_reproduction_report_from_the_computed_claims(results, saved):
+    rep, (_, report) = results["reproduce"], saved["reproduce"]
     assert rep.passed and list(rep.metrics["id"]) == ["osc"]
-    report = rep.save(tmp_path / "rep")
     assert report.name == "REPORT.md" and "osc" in report.read_text()
     claims = pd.read_csv(report.parent / "claims.csv")
     assert list(claims["id"]) == ["osc"] and list(claims["result"]) == ["PASS"]
