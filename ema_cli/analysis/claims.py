@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from ema_cli.config.claims import Claim, CompareCheck, MonotonicCheck, ScalarCheck, ValueCheck
+from ema_cli.units import fmt_num
 
 OPS = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge}
 
@@ -60,10 +61,6 @@ def _metric(row: pd.Series, metric: str, study: str) -> float:
     return float(row[metric])
 
 
-def _fmt(x: float) -> str:
-    return "NaN" if not math.isfinite(x) else f"{x:.4g}"
-
-
 def evaluate_claim(claim: Claim, studies: Mapping[str, pd.DataFrame],
                    scalars: Mapping[str, float]) -> Verdict:
     """Evaluate one claim; a claim that cannot be evaluated FAILS with the reason."""
@@ -74,20 +71,20 @@ def evaluate_claim(claim: Claim, studies: Mapping[str, pd.DataFrame],
                 raise ClaimError(f"no result named '{c.name}'")
             x = float(scalars[c.name])
             ok = math.isfinite(x) and OPS[c.op](x, c.value)
-            return Verdict(claim, ok, f"{c.name} = {_fmt(x)} ({c.op} {c.value:g} required)")
+            return Verdict(claim, ok, f"{c.name} = {fmt_num(x)} ({c.op} {c.value:g} required)")
         if c.study not in studies:
             raise ClaimError(f"no study '{c.study}' in the results")
         df = studies[c.study]
         if isinstance(c, ValueCheck):
             x = _metric(_select(df, c.where, c.study), c.metric, c.study)
             ok = math.isfinite(x) and OPS[c.op](x, c.value)
-            return Verdict(claim, ok, f"{c.metric} = {_fmt(x)} ({c.op} {c.value:g} required)")
+            return Verdict(claim, ok, f"{c.metric} = {fmt_num(x)} ({c.op} {c.value:g} required)")
         if isinstance(c, CompareCheck):
             xa = _metric(_select(df, c.a, c.study), c.metric, c.study)
             xb = _metric(_select(df, c.b, c.study), c.metric, c.study)
             ok = math.isfinite(xa) and math.isfinite(xb) and OPS[c.op](xa, c.factor * xb)
             fac = "" if c.factor == 1 else f"{c.factor:g} x "
-            return Verdict(claim, ok, f"{c.metric}: {_fmt(xa)} {c.op} {fac}{_fmt(xb)}")
+            return Verdict(claim, ok, f"{c.metric}: {fmt_num(xa)} {c.op} {fac}{fmt_num(xb)}")
         if isinstance(c, MonotonicCheck):
             if c.axis not in df.columns or c.metric not in df.columns:
                 raise ClaimError(f"study '{c.study}' lacks column '{c.axis}' or '{c.metric}'")
@@ -102,7 +99,8 @@ def evaluate_claim(claim: Claim, studies: Mapping[str, pd.DataFrame],
             else:
                 ok = bool(np.all(d < 0) if c.strict else np.all(d <= 0))
             ok = ok and bool(np.all(np.isfinite(y)))
-            pairs = ", ".join(f"{_fmt(a)}: {_fmt(b)}" for a, b in zip(sub["_x"], y, strict=True))
+            pairs = ", ".join(f"{fmt_num(a)}: {fmt_num(b)}"
+                              for a, b in zip(sub["_x"], y, strict=True))
             return Verdict(claim, ok, f"{c.metric} along {c.axis} = {pairs}")
     except ClaimError as exc:
         return Verdict(claim, False, "not evaluable", str(exc))

@@ -1,9 +1,9 @@
 """The computations of an experiment batch (the paper reproduction): thresholds, ranking, claims.
 
 Compute only: the steps fill a :class:`Reproduction` with every table and number.
-``report.reproduce_report.run_experiment`` runs the batch (the studies' sweeps and the
-identification write their folders) and ``write_reproduction`` writes REPORT.md, claims.csv and
-the figures.
+``api.reproduce.run_experiment`` runs the batch (the studies' sweeps and the identification
+write their folders) and ``report.reproduce_report.write_reproduction`` writes REPORT.md,
+claims.csv and the figures.
 """
 
 from __future__ import annotations

@@ -8,8 +8,9 @@
 
 Every function takes what the command takes: a config (YAML path, dict, model or None for the
 defaults) and ``overrides`` (the ``--set`` dotted paths, as a dict or (path, value) pairs).
-Every result has ``.metrics`` (a DataFrame, units in the column names), ``.to_pandas(form)``,
-``.plot()`` (a matplotlib Figure) and ``.save(folder)`` (the command's own writers and output
+Every result honours :class:`Result` (``api.result``): ``.metrics`` (a DataFrame, units in the
+column names), ``.to_pandas(form)``, ``.plot()`` (a matplotlib Figure or a list of them) and
+``.save(folder)`` (the command's own writers and output
 folder policy: a given folder must be new or empty). Errors are ``ema_cli.errors.EmaError``
 with a one-line message. Importing this module is cheap: numpy, numba, pandas and matplotlib
 load when first needed.
@@ -29,6 +30,8 @@ from ema_cli.api.identify_logs import (
     make_identification_data,
 )
 from ema_cli.api.margins import LoopMargins, margins
+from ema_cli.api.reproduce import ReproduceResult, reproduce
+from ema_cli.api.result import Result
 from ema_cli.api.sensitivity import Sensitivity, sensitivity
 from ema_cli.api.simulation import Simulation, simulate
 from ema_cli.api.study import Sweep, sweep
@@ -37,9 +40,8 @@ from ema_cli.api.tune import TuneResult, tune
 from ema_cli.errors import EmaError
 
 __all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
-           "FrictionSweepIdentification", "Identification", "LoopMargins", "Sensitivity",
-           "Simulation", "Sweep", "SyntheticData", "Threshold", "TuneResult", "acceptance",
-           "freqresp",
-           "identify", "identify_closed_loop", "identify_friction_sweep",
-           "make_identification_data", "margins", "sensitivity", "simulate", "sweep",
-           "threshold", "tune"]
+           "FrictionSweepIdentification", "Identification", "LoopMargins", "ReproduceResult",
+           "Result", "Sensitivity", "Simulation", "Sweep", "SyntheticData", "Threshold",
+           "TuneResult", "acceptance", "freqresp", "identify", "identify_closed_loop",
+           "identify_friction_sweep", "make_identification_data", "margins", "reproduce",
+           "sensitivity", "simulate", "sweep", "threshold", "tune"]

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from ema_cli.identify.run import IdentificationResult
+    from ema_cli.identify.settings import IdentifySettings
 
 DATA_COLUMNS = {"t_s": "t", "dtheta_rad": "dth", "domega_rad_s": "dw", "torque_nm": "torque"}
 """Identification data columns (edge name -> IdentData field); ``torque_model_nm`` is the
@@ -92,6 +93,16 @@ class Identification:
         write_identification(self.result, out, command="identify")
         finish_output(out)
         return out
+
+
+def load_settings(config: ConfigSource = None, overrides: Overrides = None
+                  ) -> IdentifySettings:
+    """The validated identification settings of ``config`` with ``overrides`` (what
+    :func:`identify` runs), e.g. to report the method before a long run."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.settings import IdentifySettings
+
+    return load_config(config, override_pairs(overrides), IdentifySettings)
 
 
 def identify(config: ConfigSource = None, overrides: Overrides = None,

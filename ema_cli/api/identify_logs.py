@@ -9,13 +9,26 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ema_cli.api._inputs import ConfigSource, Overrides, folder_arg, override_pairs
+from ema_cli.api.result import long_form
 
 if TYPE_CHECKING:
     import pandas as pd
+    from matplotlib.figure import Figure
 
     from ema_cli.identify.closed_loop_fit import ClosedLoopFit
     from ema_cli.identify.friction_sweep import FrictionFit
     from ema_cli.identify.synthetic_logs import SyntheticLog
+
+
+def _parameters_frame(js: dict[str, Any]) -> pd.DataFrame:
+    """One row per identified parameter of a fit's JSON: value, unit, standard error, 95 %
+    interval, determined."""
+    import pandas as pd
+
+    return pd.DataFrame([{"parameter": n, "value": v["value"], "unit": v["unit"],
+                          "standard_error": v["standard_error"], "ci95_low": v["ci95"][0],
+                          "ci95_high": v["ci95"][1], "determined": v["determined"]}
+                         for n, v in js["parameters"].items()])
 
 
 def _save(command: str, name: str, settings: dict[str, Any], folder: str | Path | None,
@@ -43,14 +56,27 @@ class ClosedLoopIdentification:
     @property
     def metrics(self) -> pd.DataFrame:
         """One row per free parameter: value, unit, SE, 95 % interval, determined."""
+        return _parameters_frame(self.result.to_json())
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """fit.csv: ``t_s``, each fitted channel measured and simulated at the fit (edge
+        units); ``long``: one row per sample and column."""
         import pandas as pd
 
-        rows = []
-        for n, v in self.result.to_json()["parameters"].items():
-            rows.append({"parameter": n, "value": v["value"], "unit": v["unit"],
-                         "standard_error": v["standard_error"], "ci95_low": v["ci95"][0],
-                         "ci95_high": v["ci95"][1], "determined": v["determined"]})
-        return pd.DataFrame(rows)
+        from ema_cli.report.log_identify_report import closed_loop_fit_columns
+
+        return long_form(pd.DataFrame(closed_loop_fit_columns(self.result)), form, ["t_s"])
+
+    def plot(self, channel: str | None = None) -> Figure:
+        """Measured and fitted ``channel`` (default: the first fitted one) vs time."""
+        from ema_cli.errors import EmaError
+        from ema_cli.report.log_identify_report import channel_figure
+
+        channels = list(self.result.problem.channels)
+        if channel is not None and channel not in channels:
+            raise EmaError(f"channel: {channel!r} was not fitted; expected one of "
+                           f"{', '.join(channels)}")
+        return channel_figure(self.result, channel or channels[0])
 
     def save(self, folder: str | Path | None = None) -> Path:
         """Write the folder ``ema identify --closed-loop`` writes -> the folder."""
@@ -73,6 +99,26 @@ class FrictionSweepIdentification:
         """Fc [N*m], Fs [N*m], vs [rad/s], sigma2 [N*m*s/rad]."""
         return self.result.params
 
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """One row per parameter: value, unit, SE, 95 % interval, determined."""
+        return _parameters_frame(self.result.to_json())
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """fit.csv: ``omega_rpm``, measured ``torque_nm``, fitted ``torque_model_nm``;
+        ``long``: one row per speed and column."""
+        import pandas as pd
+
+        from ema_cli.report.log_identify_report import friction_fit_columns
+
+        return long_form(pd.DataFrame(friction_fit_columns(self.result)), form, ["omega_rpm"])
+
+    def plot(self) -> Figure:
+        """The measured and fitted static friction curve, and the residuals."""
+        from ema_cli.report.log_identify_report import friction_figure
+
+        return friction_figure(self.result)
+
     def save(self, folder: str | Path | None = None) -> Path:
         """Write the folder ``ema identify --friction-sweep`` writes -> the folder."""
         from ema_cli.report.log_identify_report import write_friction_sweep
@@ -88,6 +134,28 @@ class SyntheticData:
 
     log: SyntheticLog
     settings: Any
+
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """The stated truths: one row per parameter (SI value, as ``ema params``)."""
+        import pandas as pd
+
+        return pd.DataFrame([{"parameter": n, "value": float(v)}
+                             for n, v in self.log.truth.items()])
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """The data table (``<kind>.csv``, edge units); ``long``: one row per sample and
+        column."""
+        import pandas as pd
+
+        wide = pd.DataFrame(self.log.columns)
+        return long_form(wide, form, [wide.columns[0]])
+
+    def plot(self) -> Figure:
+        """Every column of the data against the first (time, or motor speed)."""
+        from ema_cli.report.log_identify_report import synthetic_figure
+
+        return synthetic_figure(self.log)
 
     def save(self, folder: str | Path | None = None) -> Path:
         """Write ``<kind>.csv``, ``<kind>.truth.json`` and the manifest -> the folder."""

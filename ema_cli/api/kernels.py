@@ -21,6 +21,11 @@ def units() -> list[str]:
     return [*compiled.kernel_units(), IDENTIFY]
 
 
+def describe(name: str) -> str:
+    """What a unit is, in words (``sim.compiled.describe``)."""
+    return compiled.describe(name)
+
+
 def compile_unit(name: str, quiet: bool = False) -> float:
     """Compile (or load from the cache) one unit in this process -> seconds (``quiet``: no
     announcement, the caller reports)."""

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -21,6 +22,7 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
+    from ema_cli.config.sensitivity import SensitivityConfig
     from ema_cli.sensitivity.run import SensitivityResult
 
 
@@ -52,9 +54,9 @@ class Sensitivity:
         """convergence.csv: the indices on nested prefixes of the design (column ``n``)."""
         return self.result.convergence
 
-    def ranking(self, input: str | None = None, metric: str | None = None) -> list[str]:
-        """The factors, most influential first (by ST, or mu* for Morris), for one input and
-        metric (default: the first of each)."""
+    def ranked(self, input: str | None = None, metric: str | None = None) -> pd.DataFrame:
+        """The indices of one input and metric (default: the first of each), most influential
+        factor first (by ST, or mu* for Morris)."""
         from ema_cli.sensitivity.analyze import ranking
 
         names = [r.name for r in self.result.inputs]
@@ -66,8 +68,12 @@ class Sensitivity:
             raise EmaError(f"metric: {metric!r} was not analysed; expected one of "
                            f"{', '.join(self.result.cfg.metrics)}")
         ix = self.indices
-        t = ix[(ix["input"] == input) & (ix["metric"] == metric)]
-        return [str(f) for f in ranking(t, self.result.method)["factor"]]
+        return ranking(ix[(ix["input"] == input) & (ix["metric"] == metric)], self.result.method)
+
+    def ranking(self, input: str | None = None, metric: str | None = None) -> list[str]:
+        """The factors, most influential first (by ST, or mu* for Morris), for one input and
+        metric (default: the first of each)."""
+        return [str(f) for f in self.ranked(input, metric)["factor"]]
 
     def to_pandas(self, form: str = "wide") -> pd.DataFrame:
         """The indices: ``wide`` (indices.csv) or ``long`` (input, metric, transform, factor,
@@ -97,28 +103,115 @@ class Sensitivity:
         return save_sensitivity(self.result, folder_arg(folder), self.overrides)
 
 
+def run_sensitivity(
+    cfg: SensitivityConfig,
+    out: Path | None = None,
+    method: str | None = None,
+    n: int | None = None,
+    *,
+    n_jobs: int | None = None,
+    backend: str | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    progress: bool = True,
+    cache_dir: Path | None = None,
+    base_dir: Path | None = None,
+    source: str = "config",
+    overrides: Sequence[tuple[str, Any]] = (),
+    write: bool = True,
+    reuse_finished: bool = False,
+    log: Callable[[str], None] | None = None,
+) -> SensitivityResult:
+    """The one route of a sensitivity study: compute it (``sensitivity.run.compute_sensitivity``)
+    and, when ``write``, have ``report.sensitivity_report`` write its folder (``write`` False:
+    nothing is written, and no job cache unless ``cache_dir`` is given).
+
+    out        output folder; None: ``results/sensitivity/<name>/<stamp>_<hash>/``. An
+               existing folder is reused only if it holds an unfinished study of the same
+               config, method and n
+               (resumed: finished samples come from the job cache)
+    cache_dir  job cache; None: ``report.sweep_report.default_cache_dir(out)`` when writing
+
+    reuse_finished  ``out`` belongs to a run being resumed (``ema reproduce``): if it holds the
+               finished study of these very inputs, it is kept as it is (the indices are
+               recomputed from the job cache, nothing is written)
+
+    On Ctrl-C the manifest says ``interrupted`` and the exception propagates; the finished
+    samples are in the job cache for the rerun.
+    """
+    from ema_cli.report.rundir import check_output, finish_output
+    from ema_cli.report.sensitivity_report import (
+        COMMAND,
+        fingerprint,
+        finished_study,
+        prepare_folder,
+        write_manifest,
+        write_outputs,
+    )
+    from ema_cli.report.sweep_report import default_cache_dir
+    from ema_cli.sensitivity.run import compute_sensitivity, resolve_method
+
+    reused = False
+    if write:
+        method, n = resolve_method(cfg, method, n)
+        if cache_dir is None:
+            cache_dir = default_cache_dir(out)
+        fp = fingerprint(cfg, method, n)
+        if reuse_finished and out is not None and finished_study(Path(out), fp):
+            write, reused = False, True
+        else:
+            check_output(out, COMMAND, fp, resume=True)
+
+    def on_start(res: SensitivityResult) -> None:
+        if write:
+            prepare_folder(res, out, overrides)
+
+    def on_finish(res: SensitivityResult, aborted: bool) -> None:
+        if res.folder is None:
+            return
+        if aborted:
+            write_manifest(res, overrides)
+            return
+        write_outputs(res, overrides)
+        if res.complete:
+            finish_output(res.folder)
+
+    res = compute_sensitivity(cfg, method, n, n_jobs=n_jobs, backend=backend,
+                              scheduler=scheduler, force=force, progress=progress,
+                              cache_dir=cache_dir, base_dir=base_dir, source=source,
+                              on_start=on_start, on_finish=on_finish, log=log)
+    if reused:
+        res.folder = Path(out) if out is not None else None
+    return res
+
+
 def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
                 n: int | None = None, n_jobs: int | None = None, backend: str | None = None,
                 force: bool = False, progress: bool = False,
-                cache_dir: str | Path | None = None) -> Sensitivity:
+                cache_dir: str | Path | None = None, out: str | Path | None = None,
+                write: bool = False, scheduler: str | None = None,
+                log: Callable[[str], None] | None = None) -> Sensitivity:
     """Run a sensitivity study config (factors, metrics, inputs), as ``ema sensitivity CONFIG
-    --method --n --set ...`` does, without writing an output folder (``.save()`` does).
+    --method --n --set ...`` does. By default nothing is written (``.save()`` writes the
+    folder); ``write`` True (or ``out`` given): the command's folder is written as the study
+    runs (``out``, default a new one under results/sensitivity/; an unfinished study of the
+    same inputs there is resumed) with the command's job cache.
 
     method   sobol | morris (default: the config's ``sensitivity.method``)
     n        Sobol base samples (a power of two) or Morris trajectories (default: the config's)
     cache_dir  a job cache to use (finished samples are reused by later calls); without it
              nothing is written to disk
-    n_jobs, backend, force, progress   as ``api.sweep``
+    log      ``log(text)``: one line per input as it starts
+    n_jobs, backend, scheduler, force, progress   as ``api.sweep``
     """
     from ema_cli.config.loader import load_config
     from ema_cli.config.sensitivity import SensitivityConfig
-    from ema_cli.report.sensitivity_report import run_sensitivity
 
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, SensitivityConfig)
-    res = run_sensitivity(cfg, None, method, n, n_jobs=n_jobs, backend=backend, force=force,
-                          progress=progress,
+    res = run_sensitivity(cfg, folder_arg(out), method, n, n_jobs=n_jobs, backend=backend,
+                          scheduler=scheduler, force=force, progress=progress,
                           cache_dir=Path(cache_dir) if cache_dir is not None else None,
                           base_dir=base_dir(config), source=source_name(config),
-                          overrides=pairs, write=False)
+                          overrides=pairs, write=write or out is not None, log=log)
     return Sensitivity(res, pairs)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,6 +23,8 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
+    from ema_cli.config.study import StudyConfig
+    from ema_cli.sweep.plan import Plan
     from ema_cli.sweep.run import SweepResult
 
 
@@ -111,6 +114,13 @@ class Sweep:
             raise EmaError(f"kind must be metrics, errors or response, got {kind!r}")
         return [fig for _, fig in sweep_figures(self.result, kinds=(kind,))]
 
+    def finish(self) -> None:
+        """Wait for figures drawn in the background (``figures="background"``) and finish the
+        folder (final manifest, finished mark); nothing to do otherwise."""
+        from ema_cli.report.sweep_report import finish_sweep
+
+        finish_sweep(self.result)
+
     def save(self, folder: str | Path | None = None) -> Path:
         """Write the folder ``ema sweep`` writes (metrics.csv, time series, figures, summary,
         manifest) -> the folder (new or empty if given)."""
@@ -120,24 +130,90 @@ class Sweep:
                           self.overrides)
 
 
-def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | None = None,
-          backend: str | None = None, force: bool = False, progress: bool = False,
-          cache_dir: str | Path | None = None) -> Sweep:
-    """Run every job of a study config, as ``ema sweep CONFIG --set ...`` does, without
-    writing an output folder (``.save()`` does). With ``cache_dir`` the jobs are cached there
-    (finished ones are reused by later calls); without it nothing is written to disk and the
-    recorded signals are kept in memory with the result.
+def run_sweep(
+    cfg: StudyConfig | Plan,
+    out: Path | None = None,
+    n_jobs: int | None = None,
+    backend: str | None = None,
+    force: bool = False,
+    progress: bool = True,
+    *,
+    scheduler: str | None = None,
+    chunk_size: int | None = None,
+    cache_dir: Path | None = None,
+    base_dir: Path | None = None,
+    source: str = "config",
+    overrides: Sequence[tuple[str, Any]] = (),
+    write: bool = True,
+    reuse_finished: bool = False,
+    figures: str = "draw",
+) -> SweepResult:
+    """The one route of a sweep: plan the config once (``sweep.plan.plan_sweep``: jobs,
+    parameter rows, the reference sampled once), compute it (``sweep.run.compute_sweep``) and,
+    when ``write``, stream it into its output folder (``report.sweep_report.SweepFolder``).
 
-    n_jobs, backend, force, progress   as the command's options
+    cfg        a validated StudyConfig, or a Plan already made from one
+    out        output folder; None: ``results/sweep/<name>/<stamp>_<hash>/``
+    cache_dir  job cache; None: ``report.sweep_report.default_cache_dir(out)`` when writing,
+               no cache otherwise
+    write      False: write nothing (no folder, and no cache unless ``cache_dir`` is given);
+               the recorded signals stay readable from the result (kept in memory)
+    overrides, reuse_finished, figures   as ``SweepFolder``; the rest as ``compute_sweep``
     """
+    from ema_cli.report.rundir import check_output
+    from ema_cli.report.sweep_report import SweepFolder, default_cache_dir
+    from ema_cli.sweep.plan import Plan, plan_sweep
+    from ema_cli.sweep.run import compute_sweep
+
+    sink = SweepFolder(out, overrides, figures, reuse_finished) if write else None
+    if write and out is not None and not Path(out).is_dir():
+        check_output(Path(out), "sweep")  # a file, or below one: refused before the cache is
+    if cache_dir is None and write:
+        cache_dir = default_cache_dir(out)
+    plan = cfg if isinstance(cfg, Plan) else plan_sweep(cfg, base_dir, source)
+    return compute_sweep(plan, n_jobs, backend, force, progress, scheduler=scheduler,
+                         chunk_size=chunk_size, cache_dir=cache_dir,
+                         on_start=sink.start if sink else None,
+                         on_signals=sink.add if sink else None,
+                         on_finish=sink.finish if sink else None,
+                         keep_signals=not (write and plan.cfg.outputs.timeseries))
+
+
+def plan(config: ConfigSource, overrides: Overrides = None) -> Plan:
+    """The jobs a study config expands to, resolved (``sweep.plan.plan_sweep``: SI parameters,
+    labels, cache keys, the reference), as ``ema show`` lists them; nothing runs but the
+    baseline a relative axis needs."""
     from ema_cli.config.loader import load_config
     from ema_cli.config.study import StudyConfig
-    from ema_cli.report.sweep_report import run_sweep
+    from ema_cli.sweep.plan import plan_sweep
 
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
-    res = run_sweep(cfg, None, n_jobs, backend, force, progress,
+    return plan_sweep(cfg, base_dir(config), source_name(config))
+
+
+def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | None = None,
+          backend: str | None = None, force: bool = False, progress: bool = False,
+          cache_dir: str | Path | None = None, out: str | Path | None = None,
+          write: bool = False, scheduler: str | None = None, figures: str = "draw") -> Sweep:
+    """Run every job of a study config, as ``ema sweep CONFIG --set ...`` does. By default
+    nothing is written (``.save()`` writes the folder): with ``cache_dir`` the jobs are cached
+    there (finished ones are reused by later calls); without it the recorded signals are kept
+    in memory with the result. ``write`` True (or ``out`` given): the command's output folder
+    is written as the sweep runs (``out``, default a new one under results/sweep/; an
+    unfinished run of the same sweep there is resumed) with the command's job cache.
+
+    n_jobs, backend, scheduler, force, progress   as the command's options
+    figures  draw | none | background (drawn in a thread: call ``.finish()`` before exiting)
+    """
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.study import StudyConfig
+
+    pairs = override_pairs(overrides)
+    cfg = load_config(config, pairs, StudyConfig)
+    res = run_sweep(cfg, folder_arg(out), n_jobs, backend, force, progress,
+                    scheduler=scheduler,
                     cache_dir=Path(cache_dir) if cache_dir is not None else None,
                     base_dir=base_dir(config), source=source_name(config), overrides=pairs,
-                    write=False)
+                    write=write or out is not None, figures=figures)
     return Sweep(res, pairs)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
+from ema_cli.api.result import long_form
 from ema_cli.errors import EmaError
 
 if TYPE_CHECKING:
@@ -102,6 +103,18 @@ class TuneResult:
         return act
 
     # ------------------------------------------------------------------ tables
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """Per scenario: the cost metric (edge units) and its ratio to the default controller,
+        for the default, the starting and the tuned controller (scenarios.csv)."""
+        return self.scenarios_frame()
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """The search history (tuning.csv: per run and generation the scores and the best
+        values so far); ``long``: one row per run, generation and quantity."""
+        return long_form(self.history(), form, ["run", "seed", "generation", "evaluations"],
+                         "quantity")
+
     def history(self) -> pd.DataFrame:
         """tuning.csv: per run and generation the evaluations so far, the generation's best
         and mean score, the best so far, its cost when feasible and its variable values."""

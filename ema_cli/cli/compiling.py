@@ -20,7 +20,6 @@ def compile_cmd(
 
     from ema_cli.api import kernels
     from ema_cli.cli.common import err_console
-    from ema_cli.sim import compiled
 
     t0 = time.perf_counter()
     names = kernels.units()
@@ -32,7 +31,7 @@ def compile_cmd(
                           "(first run only)")
 
     def done(name: str, sec: float, k: int, n: int) -> None:
-        err_console.print(f"  [{k}/{n}] {compiled.describe(name)}: {sec:.1f} s")
+        err_console.print(f"  [{k}/{n}] {kernels.describe(name)}: {sec:.1f} s")
 
     kernels.compile_all(jobs, done)
     missing = kernels.missing()

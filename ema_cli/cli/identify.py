@@ -19,6 +19,7 @@ from ema_cli.errors import EmaError
 from ema_cli.progress import report as report_stage
 
 if TYPE_CHECKING:
+    from ema_cli.api.identification import Identification
     from ema_cli.identify.run import IdentificationResult
 
 Range = tuple[float, float]
@@ -57,6 +58,62 @@ def result_table(res: IdentificationResult) -> None:
                 caption=caption, optional=("SE", "Δopt"), where="identification.json")
 
 
+ColumnsOpt = Annotated[list[str] | None, typer.Option(
+    "--columns", help="Map a column, repeatable. Torque data: NAME=FILE_COLUMN, e.g. "
+                      "torque_nm=T_meas. --closed-loop: CHANNEL=COLUMN[:UNIT], e.g. "
+                      "theta_load_deg=pos:rad, t_s=time:ms; units: time s|ms|us, angle "
+                      "deg|rad|mrad, speed rpm|rad/s|deg/s, current A|mA, voltage V|mV "
+                      "(default: the channel's own).")]
+WindowOpt = Annotated[str | None, typer.Option(
+    "--window", metavar="T0,T1",
+    help="--closed-loop: fit only the samples with T0 <= t <= T1, in seconds of the log's "
+         "own time (e.g. 0.5,2.5); it must lie within the log.")]
+ClosedLoopOpt = Annotated[bool, typer.Option(
+    "--closed-loop", help="Fit the whole simulator to a closed-loop log (--data LOG: .csv, "
+                          ".parquet or .mat (MATLAB v5/v7.3) with t_s, theta_ref_deg, "
+                          "theta_load_deg [, omega_motor_rpm, current_a, voltage_cmd_v], or "
+                          "mapped by --columns); output error by multiple shooting (--method "
+                          "shooting, default) or GA then least squares (--method ga)."
+)]
+FrictionSweepOpt = Annotated[bool, typer.Option(
+    "--friction-sweep", help="Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a "
+                             "constant-speed sweep (--data SWEEP.csv: omega_rpm, torque_nm)."
+)]
+MakeDataOpt = Annotated[str | None, typer.Option(
+    "--make-data", help="Write synthetic data with stated truths: closed-loop (a 4 s chirp "
+                        "log) or friction-sweep; with --noise, --seed, --set plant.NAME=VALUE."
+)]
+FreeOpt = Annotated[list[str] | None, typer.Option(
+    "--free", help="--closed-loop: free a parameter with bounds, NAME=LO,HI in SI (e.g. "
+                   "Fs=0,0.2); repeatable; added to the default set kL, alpha, Fc, sigma2 "
+                   "(a config's free: replaces it).")]
+StartsOpt = Annotated[int | None, typer.Option(
+    "--starts", help="--closed-loop: starts of the multiple-shooting search (8).")]
+
+
+def torque_pairs(options: dict[str, Any], set_: list[str] | None,
+                 columns: list[str] | None) -> list[tuple[str, Any]]:
+    """The settings overrides of a torque-data identification: ``--set``, then the options
+    given (by settings path), then ``--columns``; the numbers checked against their ranges
+    (errors name the option)."""
+    for path, option in (("k_range", "--k-range"), ("alpha_range", "--alpha-range"),
+                         ("c_range", "--c-range")):
+        for v in options[path] or ():
+            check_number(v, option, low=0.0)
+    check_number(options["synthetic.noise_pct"], "--noise", low=0.0)
+    check_number(options["c"], "--c", low=0.0)
+    check_number(options["ga.pc"], "--pc", low=0.0, high=1.0)
+    check_number(options["ga.pm"], "--pm", low=0.0, high=1.0)
+    pairs: list[tuple[str, Any]] = list(parse_assignments(set_, "--set"))
+    pairs += [(path, list(v) if isinstance(v, tuple) else v) for path, v in options.items()
+              if v is not None]
+    for name, col in parse_assignments(columns, "--columns"):
+        pairs.append((f"columns.{name}", col))
+    if options["c"] is not None and options["fit_c"] is None:
+        pairs.append(("fit_c", False))  # --c fixes c even if the config asked to fit it
+    return pairs
+
+
 @handle_errors
 def identify_cmd(
     config: Annotated[Path | None, typer.Argument(
@@ -82,16 +139,8 @@ def identify_cmd(
     data: Annotated[Path | None, typer.Option(
         "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
                        "(default: synthetic data from the simulator).")] = None,
-    columns: Annotated[list[str] | None, typer.Option(
-        "--columns", help="Map a column, repeatable. Torque data: NAME=FILE_COLUMN, e.g. "
-                          "torque_nm=T_meas. --closed-loop: CHANNEL=COLUMN[:UNIT], e.g. "
-                          "theta_load_deg=pos:rad, t_s=time:ms; units: time s|ms|us, angle "
-                          "deg|rad|mrad, speed rpm|rad/s|deg/s, current A|mA, voltage V|mV "
-                          "(default: the channel's own).")] = None,
-    window: Annotated[str | None, typer.Option(
-        "--window", metavar="T0,T1",
-        help="--closed-loop: fit only the samples with T0 <= t <= T1, in seconds of the log's "
-             "own time (e.g. 0.5,2.5); it must lie within the log.")] = None,
+    columns: ColumnsOpt = None,
+    window: WindowOpt = None,
     noise: Annotated[float | None, typer.Option(
         "--noise", help="Synthetic data: Gaussian noise, % of the torque RMS (seeded).")] = None,
     damping: Annotated[str | None, typer.Option(
@@ -120,27 +169,11 @@ def identify_cmd(
         "--set", help="Override a setting by dotted path, e.g. ga.pop=50, synthetic.noise_pct=1; "
                       "repeatable (the options above win).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
-    closed_loop: Annotated[bool, typer.Option(
-        "--closed-loop", help="Fit the whole simulator to a closed-loop log (--data LOG: .csv, "
-                              ".parquet or .mat (MATLAB v5/v7.3) with t_s, theta_ref_deg, "
-                              "theta_load_deg [, omega_motor_rpm, current_a, voltage_cmd_v], or "
-                              "mapped by --columns); output error by multiple shooting (--method "
-                              "shooting, default) or GA then least squares (--method ga)."
-    )] = False,
-    friction_sweep: Annotated[bool, typer.Option(
-        "--friction-sweep", help="Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a "
-                                 "constant-speed sweep (--data SWEEP.csv: omega_rpm, torque_nm)."
-    )] = False,
-    make_data: Annotated[str | None, typer.Option(
-        "--make-data", help="Write synthetic data with stated truths: closed-loop (a 4 s chirp "
-                            "log) or friction-sweep; with --noise, --seed, --set plant.NAME=VALUE."
-    )] = None,
-    starts: Annotated[int | None, typer.Option(
-        "--starts", help="--closed-loop: starts of the multiple-shooting search (8).")] = None,
-    free: Annotated[list[str] | None, typer.Option(
-        "--free", help="--closed-loop: free a parameter with bounds, NAME=LO,HI in SI (e.g. "
-                       "Fs=0,0.2); repeatable; added to the default set kL, alpha, Fc, sigma2 "
-                       "(a config's free: replaces it).")] = None,
+    closed_loop: ClosedLoopOpt = False,
+    friction_sweep: FrictionSweepOpt = False,
+    make_data: MakeDataOpt = None,
+    starts: StartsOpt = None,
+    free: FreeOpt = None,
 ) -> None:
     """Identify kL and alpha (and c) from transmission torque data by minimising the paper's
     Eq. 8, J = sum (T_meas - T_model)^2, with a GA, beside the exact least-squares optimum.
@@ -166,46 +199,35 @@ def identify_cmd(
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")
-    from ema_cli.api.identification import identify
-    from ema_cli.config.loader import load_config
-    from ema_cli.identify.problem import PARAM_UNITS
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.api.identification import identify, load_settings
     from ema_cli.report.rundir import check_output
 
     check_output(out, "identify")
 
-    for value, option in ((k_range, "--k-range"), (alpha_range, "--alpha-range"),
-                          (c_range, "--c-range")):
-        for v in value or ():
-            check_number(v, option, low=0.0)
-    check_number(noise, "--noise", low=0.0)
-    check_number(c, "--c", low=0.0)
-    check_number(pc, "--pc", low=0.0, high=1.0)
-    check_number(pm, "--pm", low=0.0, high=1.0)
-    options: dict[str, Any] = {
+    pairs = torque_pairs({
         "k_range": k_range, "alpha_range": alpha_range, "c_range": c_range, "method": method,
         "runs": runs, "n_jobs": n_jobs, "data": str(data) if data is not None else None,
         "synthetic.noise_pct": noise, "synthetic.damping": damping, "model": model, "c": c,
         "fit_c": fit_c, "seed": seed, "ga.pop": pop, "ga.generations": generations,
-        "ga.pc": pc, "ga.pm": pm, "ga.bits": bits,
-    }
-    pairs: list[tuple[str, Any]] = list(parse_assignments(set_, "--set"))
-    pairs += [(path, list(v) if isinstance(v, tuple) else v) for path, v in options.items()
-              if v is not None]
-    for name, col in parse_assignments(columns, "--columns"):
-        pairs.append((f"columns.{name}", col))
-    if c is not None and fit_c is None:
-        pairs.append(("fit_c", False))  # --c fixes c even if the config asked to fit it
-    settings = load_config(config, pairs, IdentifySettings)
+        "ga.pc": pc, "ga.pm": pm, "ga.bits": bits}, set_, columns)
+    settings = load_settings(config, pairs)
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
                        "with --data")
     report_stage(f"identification ({settings.method}, {settings.runs} run(s))")
     ident = identify(settings)
-    res = ident.result
     report_stage("writing files and figures")
     folder = ident.save(out)
 
+    print_identification(ident, folder)
+
+
+def print_identification(ident: Identification, folder: Path) -> None:
+    """The closing lines of a torque-data identification: the result table, warnings, units,
+    the data, the cost and the timings."""
+    from ema_cli.identify.problem import PARAM_UNITS
+
+    res = ident.result
     result_table(res)
     for w in res.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")

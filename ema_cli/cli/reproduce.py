@@ -33,31 +33,16 @@ def reproduce_cmd(
 ) -> None:
     """Run every study, threshold and identification of the batch, evaluate its claims and
     write REPORT.md, claims.csv, the figures and a manifest. Exits 1 if any claim fails."""
-    import time
-
-    from ema_cli.analysis.reproduce import load_experiment
-    from ema_cli.hashing import content_hash
-    from ema_cli.report.reproduce_report import run_experiment, write_reproduction
-    from ema_cli.report.rundir import finish_output, prepare_output
-
-    check_jobs(n_jobs, "--n-jobs")
-    overrides = parse_assignments(set_, "--set")
-    exp = load_experiment(experiment, overrides)
-    folder, resumed = prepare_output("reproduce", exp.name,
-                                     content_hash({"exp": exp.model_dump(mode="json")}, 16),
-                                     out, resume=True)
-    if resumed:
-        err_console.print(f"resuming the unfinished run in {folder}")
-    t0 = time.perf_counter()
-    rep = run_experiment(experiment, folder, n_jobs=n_jobs, progress=is_interactive(),
-                         log=lambda m: err_console.print(f"[dim]{m}[/]"), experiment=exp)
-    wall = time.perf_counter() - t0
-    report = write_reproduction(rep, folder, wall)
-    finish_output(folder)
+    from ema_cli.api.reproduce import reproduce
     from ema_cli.cli.output import print_table
     from ema_cli.units import fmt_num
 
-    print_table(f"{exp.name}: claims", ("claim", "result", "computed"),
+    check_jobs(n_jobs, "--n-jobs")
+    overrides = parse_assignments(set_, "--set")
+    run = reproduce(experiment, overrides, out=out, n_jobs=n_jobs, progress=is_interactive(),
+                    log=lambda m: err_console.print(f"[dim]{m}[/]"))
+    rep, wall = run.reproduction, run.wall_s
+    print_table(f"{rep.exp.name}: claims", ("claim", "result", "computed"),
                 [(v.claim.id, "PASS" if v.passed else "FAIL",
                   v.measured if not v.error else v.error) for v in rep.verdicts],
                 justify=["left"] * 3,
@@ -66,6 +51,6 @@ def reproduce_cmd(
         console.print(f"threshold {t.spec.id}: {fmt_num(t.value, t.unit, nan='not found')}"
                       + (f" (paper: {t.spec.paper_value:g})" if t.spec.paper_value else ""))
     console.print(f"{len(rep.verdicts) - len(rep.failed)}/{len(rep.verdicts)} claims pass "
-                  f"in {wall:.1f} s -> {report}")
+                  f"in {wall:.1f} s -> {run.report}")
     if rep.failed:
         raise typer.Exit(1)

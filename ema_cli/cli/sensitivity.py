@@ -50,10 +50,7 @@ def sensitivity_cmd(
     """Global sensitivity: sample the factors (Morris or Saltelli/Sobol), run every sample as a
     cached, resumable sweep job, and write indices.csv, convergence.csv, samples.parquet, bar
     charts with confidence intervals, the convergence figure and summary.md."""
-    from ema_cli.config.loader import load_config
-    from ema_cli.config.sensitivity import SensitivityConfig
-    from ema_cli.report.sensitivity_report import run_sensitivity
-    from ema_cli.sensitivity.analyze import ranking
+    from ema_cli.api.sensitivity import sensitivity
 
     if method is not None and method not in ("morris", "sobol"):
         raise EmaError(f"--method must be morris or sobol, got {method!r}")
@@ -63,16 +60,14 @@ def sensitivity_cmd(
     if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
         raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
     overrides = parse_assignments(set_, "--set")
-    cfg = load_config(config, overrides, SensitivityConfig)
-    res = run_sensitivity(cfg, out, method, n, n_jobs=n_jobs, backend=backend,
-                          scheduler=scheduler, progress=progress, base_dir=config.parent,
-                          source=str(config), overrides=overrides,
-                          log=lambda text: err_console.print(text))
+    run = sensitivity(config, overrides, method=method, n=n, n_jobs=n_jobs, backend=backend,
+                      scheduler=scheduler, progress=progress, out=out, write=True,
+                      log=lambda text: err_console.print(text))
+    res = run.result
     key = "ST" if res.method == "sobol" else "mu_star"
-    ix = res.indices
     for r in res.inputs:
-        for metric in cfg.metrics:
-            t = ranking(ix[(ix["input"] == r.name) & (ix["metric"] == metric)], res.method)
+        for metric in res.cfg.metrics:
+            t = run.ranked(r.name, metric)
             top = ", ".join(f"{row['factor']} {row[key]:.3g}" for _, row in
                             t.head(TOP_FACTORS).iterrows())
             console.print(f"{r.name} {metric} ({key}, no unit): {top}")

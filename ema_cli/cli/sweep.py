@@ -19,7 +19,7 @@ from ema_cli.errors import EmaError
 from ema_cli.units import fmt_num
 
 if TYPE_CHECKING:
-    from ema_cli.sweep.run import SweepResult
+    from ema_cli.api.study import Sweep
 
 MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)
 MAX_TABLE_METRICS = 4  # metric columns of the terminal summary table
@@ -47,14 +47,14 @@ def _load(config: Path, set_: list[str] | None) -> tuple[Any, list[tuple[str, st
     return load_config(config, overrides, StudyConfig), overrides
 
 
-def print_summary(result: SweepResult) -> None:
+def print_summary(sweep: Sweep) -> None:
     """The closing terminal table: one row per job (capped), key metrics in edge units; at a
     narrow console the last metric columns are dropped (all are in metrics.csv), then rows
     become key/value blocks."""
     from ema_cli.cli.output import print_table
-    from ema_cli.report.sweep_report import metric_label
-    from ema_cli.sweep.run import FAILED
+    from ema_cli.report.sweep_tables import metric_label
 
+    result = sweep.result
     cfg = result.plan.cfg
     metrics = list(cfg.outputs.metrics)[:MAX_TABLE_METRICS]
     labels = [metric_label(m) for m in metrics]
@@ -63,7 +63,7 @@ def print_summary(result: SweepResult) -> None:
     shown = df if len(df) <= MAX_TABLE_ROWS else df.head(MAX_TABLE_ROWS)
     rows, styles = [], []
     for _, row in shown.iterrows():
-        styles.append("red" if row["status"] == FAILED else None)
+        styles.append("red" if row["status"] == "failed" else None)  # sweep.run.FAILED
         rows.append((row["job"], str(row["label"]), row["status"],
                      *[fmt_num(float(row[m]), nan="n/a") for m in metrics]))
     caption = (f"first {MAX_TABLE_ROWS} of {len(df)} jobs; all in metrics.csv"
@@ -104,26 +104,27 @@ def sweep_cmd(
 ) -> None:
     """Run a sweep: every job of CONFIG, in parallel, cached and resumable; writes metrics.csv,
     time series, figures, summary.md and manifest.json."""
-    from ema_cli.report.sweep_report import finish_sweep, run_sweep
+    from ema_cli.api.study import sweep
 
     check_jobs(n_jobs, "--n-jobs")
     if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
         raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
-    cfg, overrides = _load(config, set_)
-    result = run_sweep(cfg, out, n_jobs, backend, force, progress, scheduler=scheduler,
-                       cache_dir=cache_dir, base_dir=config.parent, source=str(config),
-                       overrides=overrides, figures="none" if no_figures else "background")
+    overrides = parse_assignments(set_, "--set")
+    run = sweep(config, overrides, n_jobs=n_jobs, backend=backend, force=force,
+                progress=progress, scheduler=scheduler, cache_dir=cache_dir, out=out,
+                write=True, figures="none" if no_figures else "background")
+    result = run.result
     for w in result.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
     for n in result.plan.notes:
         console.print(f"note: {n}")
-    print_summary(result)
+    print_summary(run)
     counts = result.counts()
     t = result.timings
     if result.pending is not None:
         err_console.print(f"drawing {len(result.plan.cfg.outputs.figures)} kinds of figures "
                           "(--no-figures skips them) ...")
-        finish_sweep(result)
+        run.finish()
     figs = (f"; {len(result.figures)} figures {t['figures']:.1f} s" if "figures" in t
             else "; no figures" if no_figures else "")
     console.print(f"{result.computed} runs computed, {result.cached} cached; backend "
@@ -259,10 +260,10 @@ def show_cmd(
     """Print the resolved config (every default filled in) and the jobs it expands to."""
     import yaml
 
-    from ema_cli.sweep.plan import plan_sweep
+    from ema_cli.api.study import plan as plan_study
 
-    cfg, _ = _load(config, set_)
-    plan = plan_sweep(cfg, config.parent, str(config))
+    plan = plan_study(config, parse_assignments(set_, "--set"))
+    cfg = plan.cfg
     console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False).rstrip(),
                   markup=False)
     from ema_cli.cli.output import print_table

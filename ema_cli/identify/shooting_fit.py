@@ -218,18 +218,12 @@ def on_bound(problem: ClosedLoopProblem, x: np.ndarray) -> list[str]:
             if min(x[j] - problem.lower[j], problem.upper[j] - x[j]) <= BOUND_FRACTION * span[j]]
 
 
-def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_starts: int,
-                      segment_s: float, dt_search: float, seed: int, max_iter: int,
-                      polish_iter: int, refine_iter: int = 15, step_check_iter: int = 0,
-                      nuisance: tuple[str, ...] = (), lengthen: tuple[float, ...] = (),
-                      report: Any = None) -> ShootingOutcome:
-    """Search, uncertainty, polish and verdict (module docstring); the polish at the
-    problem's fine step ``problem.dt``."""
-    res = search(problem, n_starts=n_starts, segment_s=segment_s, dt=dt_search, seed=seed,
-                 max_iter=max_iter, report=report)
-    timings: dict[str, float] = {}
-    iters: dict[str, int] = {"search": res.iterations}
-    t0 = time.perf_counter()
+def lengthen_both(res: ShootingSearch, lengthen: tuple[float, ...], dt_search: float,
+                  iters: dict[str, int], report: Any = None
+                  ) -> tuple[ShootingSearch, ShootingSearch | None, np.ndarray, bool]:
+    """The best start and the runner-up continued on the longer segments ``lengthen`` [s]
+    (:func:`lengthened`) -> (best, runner-up, the best's move at its last lengthening [SI],
+    whether the runner-up won: the cost that counts is the longest segments')."""
     # the runner-up goes the same way, so that the agreement compares like with like
     runner = None
     if res.final_V is not None and len(res.final_V) > 1:
@@ -254,7 +248,49 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     if runner_won:
         res, runner = runner, res
         shifts.reverse()
-    seg_shift = shifts[0]
+    return res, runner, shifts[0], runner_won
+
+
+def polish_check(problem: ClosedLoopProblem, notes: dict[str, str], x: np.ndarray,
+                 unc: Uncertainty, polish_iter: int, report: Any = None) -> dict[str, Any]:
+    """The whole-log polish from the estimate ``x``, as a check (module docstring, 4.): its
+    optimum, its fit per channel and whether it stays inside the intervals ``unc``."""
+    if report:
+        report("whole-log polish", 0, 1)
+    pol, njev = polish(problem, x, polish_iter)
+    r_pol = np.asarray(pol.fun)
+    pr = channel_ratios(problem, r_pol)
+    inside = [bool(unc.ci_low[j] <= pol.x[j] <= unc.ci_high[j])
+              for j in range(pol.x.shape[0])]
+    why = []
+    high_p = too_high(pr, notes)
+    if high_p:
+        why.append("the whole log simulated from rest does not reach the noise level (" +
+                   ", ".join(f"{c} {v:.3g} x" for c, v in high_p.items()) + ")")
+    if not all(inside):
+        why.append("it leaves the multiple-shooting 95 % interval of " + ", ".join(
+            n for n, ok in zip(problem.names, inside, strict=True) if not ok))
+    return {"kept": False, "agrees": not why, "why_not": why,
+            "x": dict(zip(problem.names, map(float, pol.x), strict=True)),
+            "J": float(r_pol @ r_pol), "rms_over_scale": pr,
+            "function_evaluations": int(pol.nfev), "jacobian_evaluations": njev,
+            "status": str(pol.message)}
+
+
+def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_starts: int,
+                      segment_s: float, dt_search: float, seed: int, max_iter: int,
+                      polish_iter: int, refine_iter: int = 15, step_check_iter: int = 0,
+                      nuisance: tuple[str, ...] = (), lengthen: tuple[float, ...] = (),
+                      report: Any = None) -> ShootingOutcome:
+    """Search, uncertainty, polish and verdict (module docstring); the polish at the
+    problem's fine step ``problem.dt``."""
+    res = search(problem, n_starts=n_starts, segment_s=segment_s, dt=dt_search, seed=seed,
+                 max_iter=max_iter, report=report)
+    timings: dict[str, float] = {}
+    iters: dict[str, int] = {"search": res.iterations}
+    t0 = time.perf_counter()
+    res, runner, seg_shift, runner_won = lengthen_both(res, lengthen, dt_search, iters,
+                                                       report)
     x_best_coarse = res.x.copy()
     x_runner = None if runner is None else runner.x.copy()
     timings["lengthen_s"] = time.perf_counter() - t0
@@ -332,27 +368,8 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
         out.polish = {"kept": False, "why": "no polish (polish: false)"}
         return out
     t0 = time.perf_counter()
-    if report:
-        report("whole-log polish", 0, 1)
-    pol, njev = polish(problem, res.x, polish_iter)
+    out.polish = polish_check(problem, notes, res.x, unc_ms, polish_iter, report)
     timings["polish_s"] = time.perf_counter() - t0
-    r_pol = np.asarray(pol.fun)
-    pr = channel_ratios(problem, r_pol)
-    inside = [bool(unc_ms.ci_low[j] <= pol.x[j] <= unc_ms.ci_high[j])
-              for j in range(pol.x.shape[0])]
-    why = []
-    high_p = too_high(pr, notes)
-    if high_p:
-        why.append("the whole log simulated from rest does not reach the noise level (" +
-                   ", ".join(f"{c} {v:.3g} x" for c, v in high_p.items()) + ")")
-    if not all(inside):
-        why.append("it leaves the multiple-shooting 95 % interval of " + ", ".join(
-            n for n, ok in zip(problem.names, inside, strict=True) if not ok))
-    out.polish = {"kept": False, "agrees": not why, "why_not": why,
-                  "x": dict(zip(problem.names, map(float, pol.x), strict=True)),
-                  "J": float(r_pol @ r_pol), "rms_over_scale": pr,
-                  "function_evaluations": int(pol.nfev), "jacobian_evaluations": njev,
-                  "status": str(pol.message)}
     return out
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import manifest, write_json, write_text
 
 VERDICT_MEANING = {
@@ -14,10 +15,6 @@ VERDICT_MEANING = {
     "FAIL": "at least one case (the fitted actuator or an interval corner) misses a limit",
     "INCONCLUSIVE": "the identification cannot carry a sign-off, whatever the batteries say",
 }
-
-
-def _g(v: float) -> str:
-    return f"{v:.5g}"
 
 
 def design_markdown(js: dict[str, Any]) -> str:
@@ -40,8 +37,9 @@ def design_markdown(js: dict[str, Any]) -> str:
     truth = ident.get("truth") or {}
     for n, p in ident["parameters"].items():
         lo, hi = p["ci95"]
-        t = _g(truth[n]) if n in truth else "-"
-        lines.append(f"| {n} | {_g(p['value'])} | [{_g(lo)}, {_g(hi)}] | {p['unit']} | "
+        t = md_cell(truth[n], 5) if n in truth else "-"
+        lines.append(f"| {n} | {md_cell(p['value'], 5)} | [{md_cell(lo, 5)}, "
+                     f"{md_cell(hi, 5)}] | {p['unit']} | "
                      f"{'yes' if p['determined'] else 'NO'} | {t} |")
     opt = ident["optimum"]
     lines += ["", "Optimum: " + ("not checked (GA search)" if opt is None else
@@ -55,15 +53,15 @@ def design_markdown(js: dict[str, Any]) -> str:
               "actuator). Cost: " + tr["cost_meaning"] + ".", "",
               "| gain | before | after |", "|---|---:|---:|"]
     for g, after in tr["gains_after"].items():
-        lines.append(f"| {g} | {_g(tr['gains_before'][g])} | {_g(after)} |")
-    lines.append(f"| cost | {_g(tr['cost_before'])} | {_g(tr['cost_after'])} |")
+        lines.append(f"| {g} | {md_cell(tr['gains_before'][g], 5)} | {md_cell(after, 5)} |")
+    lines.append(f"| cost | {md_cell(tr['cost_before'], 5)} | {md_cell(tr['cost_after'], 5)} |")
     lines += ["", "Details: tune/tuning.md; the tuned actuator: tune/tuned.yaml.", "",
               "## Acceptance: cases x tests", ""]
     names = list(ident["parameters"])
     head = ["case", *names, *acc["tests"], "verdict"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for c in cases:
-        vals = [_g(c["parameters"][n]) + ({"low": " (lo)", "high": " (hi)"}.get(
+        vals = [md_cell(c["parameters"][n], 5) + ({"low": " (lo)", "high": " (hi)"}.get(
             c["sides"].get(n, ""), "")) for n in names]
         tests = ["pass" if c["tests"].get(t) else "**FAIL**" for t in acc["tests"]]
         lines.append("| " + " | ".join([c["case"], *vals, *tests,

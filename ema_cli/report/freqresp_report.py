@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -12,6 +11,7 @@ from matplotlib.figure import Figure
 
 from ema_cli.analysis.freqresp import LIMIT_NAMES
 from ema_cli.report.figures import subplots
+from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
 
 OUTPUT_FILES = ("config.resolved.yaml", "freqresp.csv", "freqresp.json", "bode.png",
@@ -82,14 +82,6 @@ def bode_figure(res: Any, title: str) -> Figure:
     fig.subplots_adjust(left=0.08, right=0.79, bottom=0.06, top=0.92, hspace=0.3)
     return fig
 
-def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return "—" if not math.isfinite(v) else f"{v:.4g}"
-    if isinstance(v, list):
-        return ", ".join(v) or "none"
-    return str(v)
-
-
 def _onsets(onsets: Mapping[str, float]) -> str:
     return ", ".join(f"{k} ({v:.3g})" for k, v in onsets.items()) or "none"
 
@@ -105,15 +97,16 @@ def summary_markdown(res: Any, summary: Mapping[str, Any]) -> str:
              "at [Hz] | max THD [%] | limits reached (from [Hz]) | binding limit |",
              "|---|---|---|---|---|---|---|---|"]
     for r in summary["amplitudes"]:
-        lines.append(f"| {_fmt(r['amplitude_deg'])} | {_fmt(r['f_3db_hz'])} | "
-                     f"{_fmt(r['f_minus90_hz'])} | {_fmt(r['peak_db'])} | {_fmt(r['f_peak_hz'])}"
-                     f" | {_fmt(r['max_thd_pct'])} | {_onsets(r['limit_onset_hz'])} | "
+        lines.append(f"| {md_cell(r['amplitude_deg'])} | {md_cell(r['f_3db_hz'])} | "
+                     f"{md_cell(r['f_minus90_hz'])} | {md_cell(r['peak_db'])} | "
+                     f"{md_cell(r['f_peak_hz'])}"
+                     f" | {md_cell(r['max_thd_pct'])} | {_onsets(r['limit_onset_hz'])} | "
                      f"{r['binding_limit'] or 'none'} |")
     lin = summary["linear"]
-    lines += ["", f"Linear model: -3 dB at {_fmt(lin['f_3db_hz'])} Hz."]
+    lines += ["", f"Linear model: -3 dB at {md_cell(lin['f_3db_hz'])} Hz."]
     est = lin["limit_at_bandwidth"]
     if est is not None:
-        amps = ", ".join(f"{LIMIT_NAMES[k]} from {_fmt(v)} deg"
+        amps = ", ".join(f"{LIMIT_NAMES[k]} from {md_cell(v)} deg"
                          for k, v in est["amplitude_deg"].items())
         lines.append(f"At that frequency the linear model reaches {amps}: "
                      f"{est['first_limit']} binds first.")
@@ -124,8 +117,9 @@ def summary_markdown(res: Any, summary: Mapping[str, Any]) -> str:
                      "amplitude.")
     else:
         lines.append(f"The bandwidth first drops more than 10 % below the small-signal "
-                     f"{_fmt(drop['small_signal_f_3db_hz'])} Hz at {_fmt(drop['amplitude_deg'])}"
-                     f" deg ({_fmt(drop['f_3db_hz'])} Hz, {_fmt(drop['drop_pct'])} % lower); the "
+                     f"{md_cell(drop['small_signal_f_3db_hz'])} Hz at "
+                     f"{md_cell(drop['amplitude_deg'])} deg ({md_cell(drop['f_3db_hz'])} Hz, "
+                     f"{md_cell(drop['drop_pct'])} % lower); the "
                      f"binding limit is {_limit(drop['binding_limit'])}.")
     return "\n".join(lines) + "\n\n![Bode plot](bode.png)\n"
 

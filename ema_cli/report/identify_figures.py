@@ -2,13 +2,13 @@
 
 The figure functions take an ``IdentificationResult`` and return a Figure (no file I/O);
 :func:`write_identification` writes the whole output folder through ``report.rundir``;
-:func:`identification_summary` runs ``identify.run.summarize_identification`` and writes its
-folders; :func:`write_example_csv` writes identification data as a CSV.
+:func:`write_identification_summary` writes the folders of an
+``identify.run.summarize_identification``; :func:`write_example_csv` writes identification
+data as a CSV.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,15 +17,13 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from ema_cli.identify.run import summarize_identification
 from ema_cli.model.transmission import shaft_torque
 from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json
 
 if TYPE_CHECKING:
     from ema_cli.identify.data import IdentData
-    from ema_cli.identify.run import IdentificationResult
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.identify.run import IdentificationResult, IdentificationSummary
 
 LOG_FLOOR_DECADES = 30  # J plots on a log axis are floored this many decades below the start
 REL_FLOOR_PCT = 1e-14  # distances to the optimum below this (rounding) are drawn at it [%]
@@ -227,20 +225,11 @@ def write_identification(
     return list(OUTPUT_FILES)
 
 
-def identification_summary(
-    settings: Mapping[str, Any] | IdentifySettings,
-    out: Path | None = None,
-    with_paper_mode: bool = True,
-    with_mismatch: bool = True,
-) -> dict[str, Any]:
-    """``identify.run.summarize_identification`` (its flat scalars are returned) and, when
-    ``out`` is given, the identify outputs written there (the paper-mode run's in
-    ``out/ga-paper``)."""
-    summary = summarize_identification(settings, with_paper_mode, with_mismatch)
-    if out is not None:
-        for sub, res in summary.results.items():
-            write_identification(res, Path(out) / sub, command="identify (library)")
-    return summary.scalars
+def write_identification_summary(summary: IdentificationSummary, out: Path) -> None:
+    """Write the identify folder of every run of ``summary`` (``identify.run.
+    summarize_identification``) under ``out`` (the paper-mode run's in ``out/ga-paper``)."""
+    for sub, res in summary.results.items():
+        write_identification(res, Path(out) / sub, command="identify (library)")
 
 
 def write_example_csv(path: str | Path, data: IdentData) -> None:

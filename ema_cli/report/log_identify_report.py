@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 
 from ema_cli.identify.closed_loop import CHANNELS, make_grid
 from ema_cli.report.figures import subplots
+from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import (
     manifest,
     write_columns,
@@ -32,10 +33,6 @@ if TYPE_CHECKING:
 
 CHANNEL_LABELS = {"theta_load_deg": "load angle", "omega_motor_rpm": "motor speed",
                   "current_a": "armature current", "voltage_cmd_v": "voltage demand"}
-
-
-def _fmt(v: float) -> str:
-    return f"{v:.6g}"
 
 
 def channel_figure(fit: ClosedLoopFit, channel: str) -> Figure:
@@ -156,12 +153,13 @@ def closed_loop_summary(fit: ClosedLoopFit) -> str:
     for n, v in js["parameters"].items():
         det = "yes" if v["determined"] else "**NOT DETERMINED**: " + "; ".join(
             v["not_determined_because"])
-        row = (f"| {n} | {_fmt(v['value'])} | {v['unit']} | {_fmt(v['standard_error'])} | "
-               f"[{_fmt(v['ci95'][0])}, {_fmt(v['ci95'][1])}] | {det} |")
+        row = (f"| {n} | {md_cell(v['value'], 6)} | {v['unit']} | "
+               f"{md_cell(v['standard_error'], 6)} | "
+               f"[{md_cell(v['ci95'][0], 6)}, {md_cell(v['ci95'][1], 6)}] | {det} |")
         if "truth" in js:
             t = js["truth"].get(n)
             e = js["error_pct_vs_truth"].get(n)
-            row += f" {'' if t is None else _fmt(t)} | {'' if e is None else f'{e:+.3g}'} |"
+            row += f" {'' if t is None else md_cell(t, 6)} | {'' if e is None else f'{e:+.3g}'} |"
         lines.append(row)
     lines += ["", "Fit RMS per channel: " + ", ".join(
         f"{c} {v:.4g} {CHANNELS[c][2]}" for c, v in js["fit_rms"].items()), "",
@@ -176,6 +174,17 @@ def closed_loop_summary(fit: ClosedLoopFit) -> str:
     lines += ["`fitted.yaml` runs the fitted actuator on the logged command: "
               "`ema simulate fitted.yaml`.", ""]
     return "\n".join(lines)
+
+
+def closed_loop_fit_columns(fit: ClosedLoopFit) -> dict[str, np.ndarray]:
+    """fit.csv of a closed-loop identification: ``t_s``, then each fitted channel measured and
+    simulated at the fit (``theta_load_deg``, ``theta_load_model_deg``, ...), edge units."""
+    fits = {"t_s": fit.problem.log.t}
+    for j, c in enumerate(fit.problem.channels):
+        f = CHANNELS[c][1]
+        fits[c] = fit.problem.measured[j] / f
+        fits[f"{c.rsplit('_', 1)[0]}_model_{c.rsplit('_', 1)[1]}"] = fit.prediction[j] / f
+    return fits
 
 
 def write_closed_loop(fit: ClosedLoopFit, out: Path, **fields: Any) -> list[str]:
@@ -200,12 +209,7 @@ def write_closed_loop(fit: ClosedLoopFit, out: Path, **fields: Any) -> list[str]
         log.theta_ref)}, float_format="%.17g")
     write_text(out / "fitted.yaml", yaml.safe_dump(fitted_config(fit, "reference.csv"),
                                                   sort_keys=False))
-    fits = {"t_s": log.t}
-    for j, c in enumerate(fit.problem.channels):
-        f = CHANNELS[c][1]
-        fits[c] = fit.problem.measured[j] / f
-        fits[f"{c.rsplit('_', 1)[0]}_model_{c.rsplit('_', 1)[1]}"] = fit.prediction[j] / f
-    write_columns(out / "fit.csv", fits, float_format="%.12g")
+    write_columns(out / "fit.csv", closed_loop_fit_columns(fit), float_format="%.12g")
     if fit.history is not None:
         h = fit.history
         write_columns(out / "history.csv", {
@@ -266,12 +270,36 @@ def friction_summary(fit: FrictionFit) -> str:
     for n, v in js["parameters"].items():
         det = "yes" if v["determined"] else "**NOT DETERMINED**: " + "; ".join(
             v["not_determined_because"])
-        lines.append(f"| {n} | {_fmt(v['value'])} | {v['unit']} | {_fmt(v['standard_error'])}"
-                     f" | [{_fmt(v['ci95'][0])}, {_fmt(v['ci95'][1])}] | {det} |")
+        lines.append(f"| {n} | {md_cell(v['value'], 6)} | {v['unit']} | "
+                     f"{md_cell(v['standard_error'], 6)}"
+                     f" | [{md_cell(v['ci95'][0], 6)}, {md_cell(v['ci95'][1], 6)}] | {det} |")
     lines += ["", f"sigma0: {js['sigma0']}.", ""]
     if fit.warnings:
         lines += ["Warnings:", *[f"- {w}" for w in fit.warnings], ""]
     return "\n".join(lines)
+
+
+def friction_fit_columns(fit: FrictionFit) -> dict[str, np.ndarray]:
+    """fit.csv of a friction-sweep identification: ``omega_rpm``, ``torque_nm`` (measured),
+    ``torque_model_nm`` (the fitted static curve)."""
+    return {"omega_rpm": fit.data.omega / RPM, "torque_nm": fit.data.torque,
+            "torque_model_nm": fit.model()}
+
+
+def synthetic_figure(log: SyntheticLog) -> Figure:
+    """Synthetic data: every column against the first (time, or motor speed), one panel each."""
+    names = list(log.columns)
+    x, ys = names[0], names[1:]
+    fig, axes = subplots(len(ys), 1, figsize=(10, 1.8 + 1.6 * len(ys)), sharex=True,
+                         squeeze=False)
+    for ax, y in zip(axes[:, 0], ys, strict=True):
+        ax.plot(log.columns[x], log.columns[y], lw=0.9)
+        ax.set_ylabel(y)
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel(x)
+    fig.suptitle(f"ema identify --make-data {log.kind}: {log.description}", fontsize=9)
+    fig.tight_layout()
+    return fig
 
 
 def write_friction_sweep(fit: FrictionFit, out: Path, settings: dict[str, Any],
@@ -282,9 +310,7 @@ def write_friction_sweep(fit: FrictionFit, out: Path, settings: dict[str, Any],
              "manifest.json"]
     write_json(out / "identification.json", fit.to_json())
     write_figure(out / "friction_fit.png", friction_figure(fit))
-    write_columns(out / "fit.csv", {"omega_rpm": fit.data.omega / RPM,
-                                    "torque_nm": fit.data.torque,
-                                    "torque_model_nm": fit.model()}, float_format="%.12g")
+    write_columns(out / "fit.csv", friction_fit_columns(fit), float_format="%.12g")
     write_text(out / "summary.md", friction_summary(fit))
     write_json(out / "manifest.json", manifest("identify --friction-sweep", settings=settings,
                                                outputs=files, **fields))

@@ -1,39 +1,28 @@
 """Run and write a reproduction: study sweeps, identification, paper figures, threshold plots,
 claims.csv, REPORT.md, manifest.
 
-:func:`run_experiment` runs the batch (its sweeps and identification write their folders under
-``out``; the rest is computed by ``analysis.reproduce``); :func:`write_reproduction` writes the
-report.
+``api.reproduce.run_experiment`` runs the batch (its sweeps and identification write their
+folders under ``out``; the rest is computed by ``analysis.reproduce``);
+:func:`write_reproduction` writes the report from the computed ``Reproduction`` (nothing here
+simulates).
 """
 
 from __future__ import annotations
 
-import math
-import time
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
 from ema_cli.analysis.claims import verdicts_frame
 from ema_cli.analysis.reproduce import (
     Reproduction,
-    add_identification,
-    compute_thresholds,
-    conclude,
-    load_experiment,
-    sensitivity_config,
-    study_config,
 )
 from ema_cli.config.base import check_plain_name
-from ema_cli.config.experiment import ExperimentConfig, StudySpec
-from ema_cli.errors import EmaError
+from ema_cli.config.experiment import StudySpec
 from ema_cli.model.nonlinearities import lookup
 from ema_cli.report.figures import overlay_figure
-from ema_cli.report.identify_figures import identification_summary
+from ema_cli.report.markdown import md_cell, md_table
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
-from ema_cli.report.sensitivity_report import run_sensitivity
-from ema_cli.report.sweep_report import default_cache_dir, run_sweep
 from ema_cli.report.threshold_figures import threshold_figure
 
 FIGURE_METRICS = ("t50_s", "overshoot_pct", "settling_time_s", "p2p_err_pos_deg",
@@ -42,100 +31,12 @@ FIGURE_METRICS = ("t50_s", "overshoot_pct", "settling_time_s", "p2p_err_pos_deg"
 """Metrics listed under each figure of REPORT.md."""
 
 
-def _under(out: Path, *names: str) -> Path:
+def under(out: Path, *names: str) -> Path:
     """``out/name/...`` where every name is a plain file or folder name (ids and figure names
     come from the experiment file; the schema has checked them, this keeps every join safe)."""
     for name in names:
         check_plain_name(name, "an output file or folder name")
     return out.joinpath(*names)
-
-
-def run_threshold_tuning(path: Path, tid: str, rel: str, log: Any = print
-                         ) -> tuple[dict[str, float], dict[str, Any]]:
-    """Run the tuning config ``rel`` (relative to the experiment file ``path``) of threshold
-    ``tid`` -> (tuned values, summary: cost, constraints met, evaluations, seconds)."""
-    from ema_cli.config.loader import load_config
-    from ema_cli.config.tune import TuneConfig
-    from ema_cli.tune.problem import build_scenarios
-    from ema_cli.tune.run import run_tuning
-
-    cpath = (path.parent / rel).resolve()
-    if not cpath.is_file():
-        raise EmaError(f"{path}: threshold '{tid}': tuning '{rel}' is not a file")
-    cfg = load_config(cpath, [], TuneConfig)
-    log(f"tuning for threshold {tid}: {cpath} ({cfg.optimiser.method}, budget "
-        f"{cfg.optimiser.budget})")
-    scenarios, _ = build_scenarios(cfg, cpath.parent)
-    o = run_tuning(cfg, scenarios)
-    if not o.feasible:
-        raise EmaError(f"{path}: threshold '{tid}': the tuning {rel} met no feasible "
-                       "controller")
-    values = {v: float(x) for v, x in zip(o.problem.variables, o.best.x, strict=True)}
-    summary = {"config": rel, "cost": float(o.after.cost[0]), "feasible": o.feasible,
-               "evaluations": int(o.timings["evaluations"]), "wall_s": o.wall_s,
-               "method": o.method}
-    return values, summary
-
-
-def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
-                   progress: bool = True, log: Any = print,
-                   experiment: ExperimentConfig | None = None) -> Reproduction:
-    """Run the whole batch into ``out``; returns the computed Reproduction. ``experiment``: the
-    validated experiment file (default: read from ``path``).
-
-    Each study's sweep folder goes to ``out/studies/<id>``, the identification's to
-    ``out/identification``; :func:`write_reproduction` writes the report itself.
-    """
-    rep = Reproduction(experiment if experiment is not None else load_experiment(path), path)
-    t0 = time.perf_counter()
-    for s in rep.exp.studies:
-        cfg, cpath = study_config(path, s.config)
-        log(f"study {s.id}: {cpath}")
-        res = run_sweep(cfg, _under(out, "studies", s.id), n_jobs=n_jobs, progress=progress,
-                        cache_dir=default_cache_dir(out),  # one cache for every study
-                        base_dir=cpath.parent, source=str(cpath),
-                        reuse_finished=True)  # a resumed run: finished studies are kept
-        rep.studies[s.id] = res.metrics
-        rep.sweeps[s.id] = res
-    rep.timings["studies"] = time.perf_counter() - t0
-    tuned = {}
-    for t in rep.exp.thresholds:
-        if t.tuning is not None:
-            t1 = time.perf_counter()
-            tuned[t.id] = run_threshold_tuning(path, t.id, t.tuning, log)
-            rep.timings[f"tuning_{t.id}"] = time.perf_counter() - t1
-    compute_thresholds(rep, log, tuned)
-    if rep.exp.sensitivity is not None:
-        t0 = time.perf_counter()
-        spec = rep.exp.sensitivity
-        cfg, cpath = sensitivity_config(path, spec)
-        log(f"sensitivity: {cpath} ({spec.method}, n = {spec.n})")
-        rep.sensitivity = run_sensitivity(
-            cfg, _under(out, "sensitivity"), spec.method, spec.n, n_jobs=n_jobs,
-            progress=progress, cache_dir=default_cache_dir(out), base_dir=cpath.parent,
-            source=str(cpath), reuse_finished=True)
-        rep.timings["sensitivity"] = time.perf_counter() - t0
-    if rep.exp.identification is not None:
-        t0 = time.perf_counter()
-        log("identification (paper §3.1)")
-        add_identification(rep, identification_summary(rep.exp.identification.settings,
-                                                        out / "identification"))
-        rep.timings["identification"] = time.perf_counter() - t0
-    return conclude(rep)
-
-
-def _g(x: Any) -> str:
-    if isinstance(x, float):
-        return "n/a" if not math.isfinite(x) else f"{x:.4g}"
-    return str(x)
-
-
-def _md_table(df: pd.DataFrame) -> str:
-    cols = list(df.columns)
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for _, row in df.iterrows():
-        lines.append("| " + " | ".join(_g(row[c]).replace("|", "/") for c in cols) + " |")
-    return "\n".join(lines)
 
 
 def study_figure(rep: Reproduction, spec: StudySpec):
@@ -162,11 +63,11 @@ def write_reproduction(rep: Reproduction, out: Path, wall: float) -> Path:
     """Write every output of a reproduction into ``out``; returns REPORT.md's path."""
     exp = rep.exp
     for spec in exp.studies:
-        write_figure(_under(out, spec.figure), study_figure(rep, spec))
+        write_figure(under(out, spec.figure), study_figure(rep, spec))
     for t in rep.thresholds:
         pl_label = f"{t.spec.vary} [{lookup(t.spec.vary).unit}]"
         title = f"Threshold '{t.spec.id}': {t.spec.vary}, {t.input_desc}"
-        write_figure(_under(out, f"threshold_{t.spec.id}.png"),
+        write_figure(under(out, f"threshold_{t.spec.id}.png"),
                      threshold_figure(t.result, t.criteria, pl_label, title))
     claims = verdicts_frame(rep.verdicts)
     write_csv(out / "claims.csv", claims)
@@ -185,7 +86,7 @@ def write_reproduction(rep: Reproduction, out: Path, wall: float) -> Path:
     if rep.sensitivity_ranking is not None:
         write_csv(out / "sensitivity_ranking.csv", rep.sensitivity_ranking, float_format="%.6g")
     for sid, df in rep.studies.items():
-        write_csv(_under(out, "tables", f"{sid}_metrics.csv"), df, float_format="%.9g")
+        write_csv(under(out, "tables", f"{sid}_metrics.csv"), df, float_format="%.9g")
     report = out / "REPORT.md"
     write_text(report, render_report(rep, wall))
     write_json(out / "manifest.json", manifest(
@@ -220,7 +121,7 @@ def sensitivity_section(rep: Reproduction) -> list[str]:
         cols = ["rank", "factor", key, f"{key}_conf", "oat_rank"]
         if key == "ST":
             cols.insert(4, "S1")
-        lines += [f"**Input {inp}, `{metric}`** (first six):", "", _md_table(top[cols]), ""]
+        lines += [f"**Input {inp}, `{metric}`** (first six):", "", md_table(top[cols]), ""]
     mine = table[(table["input"] == spec.input) & (table["metric"] == spec.metric)]
     first = str(mine["factor"].iloc[0])
     rank = int(rep.scalars["sensitivity.paper_first_rank"])
@@ -257,7 +158,7 @@ def render_report(rep: Reproduction, wall: float) -> str:
              "result": ("**PASS**" if v.passed else "**FAIL**") +
                        (f" ({v.error})" if v.error else "")} for v in rep.verdicts]
     if rows:
-        lines += [_md_table(pd.DataFrame(rows)), ""]
+        lines += [md_table(pd.DataFrame(rows)), ""]
     if rep.thresholds:
         lines += ["## Thresholds", "",
                   "Computed by bracketing and bisection on batched simulations "
@@ -272,12 +173,12 @@ def render_report(rep: Reproduction, wall: float) -> str:
             else:
                 verdict = "paper's limit is safe" if t.value <= pv else "paper's limit is too lax"
             rows.append({"threshold": t.spec.id, "paper": t.spec.paper,
-                         "paper value": _g(pv) if pv is not None else "-",
+                         "paper value": md_cell(pv) if pv is not None else "-",
                          "ours": f"{t.value:.4g} {t.unit}",
                          "criterion": "; ".join(map(str, t.criteria)),
                          "bracket": f"[{t.result.bracket[0]:.4g}, {t.result.bracket[1]:.4g}]",
                          "simulations": t.result.n_sims, "comparison": verdict})
-        lines += [_md_table(pd.DataFrame(rows)), ""]
+        lines += [md_table(pd.DataFrame(rows)), ""]
         for t in rep.thresholds:
             if t.tuned is not None and t.tuning is not None:
                 lines += [f"Threshold `{t.spec.id}` runs with the controller tuned by `ema tune "
@@ -295,7 +196,7 @@ def render_report(rep: Reproduction, wall: float) -> str:
         lines += ["## Ranking of the nonlinearities", "",
                   f"Worst ratio of `{exp.ranking.metric}` to the study's baseline at the paper's "
                   f"magnitudes. The paper: {exp.ranking.paper}", "",
-                  _md_table(rep.ranking), ""]
+                  md_table(rep.ranking), ""]
         first = str(rep.ranking["study"].iloc[0])
         agree = "agrees" if first == exp.ranking.paper_first else "differs"
         lines += [f"Our model ranks **{first}** first; the paper names "
@@ -303,7 +204,7 @@ def render_report(rep: Reproduction, wall: float) -> str:
     lines += sensitivity_section(rep)
     if rep.identification is not None:
         lines += ["## Identification (paper §3.1)", ""]
-        lines += [_md_table(pd.DataFrame([{"quantity": k, "value": _g(v)}
+        lines += [md_table(pd.DataFrame([{"quantity": k, "value": md_cell(v)}
                                           for k, v in rep.identification.items()
                                           if not isinstance(v, dict | list)])), ""]
         for f in ("convergence.png", "fit.png"):
@@ -314,5 +215,5 @@ def render_report(rep: Reproduction, wall: float) -> str:
         cols = ["label", *[c for c in FIGURE_METRICS if c in df.columns]]
         lines += [f"### {spec.caption}", "", f"![{spec.id}]({spec.figure})", "",
                   f"*Paper:* {spec.shows}" if spec.shows else "", "",
-                  _md_table(df[cols]), ""]
+                  md_table(df[cols]), ""]
     return "\n".join(lines) + "\n"

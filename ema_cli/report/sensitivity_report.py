@@ -13,8 +13,9 @@ Layout of ``results/sensitivity/<name>/<stamp>_<hash>/`` (or ``--out``)::
     summary.md               the ranking per input and metric, the figures
     manifest.json            version, git commit, seed, method, n, runs, timings
 
-:func:`run_sensitivity` runs a study (``sensitivity.run.compute_sensitivity``) and writes the
-folder. The folder follows the one ``--out`` policy (``rundir.prepare_output``): an unfinished
+``api.sensitivity.run_sensitivity`` runs a study (``sensitivity.run.compute_sensitivity``) and
+has this module write the folder (:func:`prepare_folder`, :func:`write_outputs`); nothing here
+simulates. The folder follows the one ``--out`` policy (``rundir.prepare_output``): an unfinished
 study of the same inputs (same config, method and n) is resumed in place; its samples come from
 the job cache (``OUT/.cache`` for an ``--out`` outside results/, else ``results/.cache/sweep``),
 so only the unfinished ones run.
@@ -22,8 +23,7 @@ so only the unfinished ones run.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +35,8 @@ from ema_cli.config.base import check_plain_name
 from ema_cli.config.sensitivity import SensitivityConfig
 from ema_cli.hashing import content_hash
 from ema_cli.report.figures import subplots
+from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import (
-    check_output,
     finish_output,
     manifest,
     prepare_output,
@@ -45,9 +45,9 @@ from ema_cli.report.rundir import (
     write_json,
     write_text,
 )
-from ema_cli.report.sweep_report import default_cache_dir, metric_label
+from ema_cli.report.sweep_tables import metric_label
 from ema_cli.sensitivity.analyze import ranking
-from ema_cli.sensitivity.run import SensitivityResult, compute_sensitivity, resolve_method
+from ema_cli.sensitivity.run import SensitivityResult
 
 COMMAND = "sensitivity"
 NEGLIGIBLE_ST = 0.02  # a factor with ST below this is listed as without influence [-]
@@ -146,12 +146,6 @@ def figures(res: SensitivityResult) -> list[tuple[str, Figure]]:
     return out
 
 
-def _g(x: Any, digits: int = 3) -> str:
-    if isinstance(x, float | np.floating):
-        return "n/a" if not math.isfinite(x) else f"{x:.{digits}f}"
-    return str(x)
-
-
 def summary_markdown(res: SensitivityResult, names: Sequence[str]) -> str:
     """summary.md: the study, then per input and metric the factors ranked with their indices,
     the factors without influence, and the figures."""
@@ -183,18 +177,20 @@ def summary_markdown(res: SensitivityResult, names: Sequence[str]) -> str:
             if sobol:
                 lines += ["| rank | factor | ST | ± | S1 | ± |", "|---|---|---|---|---|---|"]
                 for _, row in ranked.iterrows():
-                    lines.append(f"| {row['rank']} | {row['factor']} | {_g(row['ST'])} | "
-                                 f"{_g(row['ST_conf'])} | {_g(row['S1'])} | "
-                                 f"{_g(row['S1_conf'])} |")
+                    lines.append(f"| {row['rank']} | {row['factor']} | {md_cell(row['ST'])} | "
+                                 f"{md_cell(row['ST_conf'])} | {md_cell(row['S1'])} | "
+                                 f"{md_cell(row['S1_conf'])} |")
                 small = ranked[ranked["ST"] < NEGLIGIBLE_ST]["factor"].tolist()
                 lines += ["", f"Without influence (ST < {NEGLIGIBLE_ST}): "
                               f"{', '.join(small) or 'none'}.", ""]
             else:
                 lines += ["| rank | factor | mu* | ± | sigma | mu |", "|---|---|---|---|---|---|"]
                 for _, row in ranked.iterrows():
-                    lines.append(f"| {row['rank']} | {row['factor']} | {_g(row['mu_star'], 4)}"
-                                 f" | {_g(row['mu_star_conf'], 4)} | {_g(row['sigma'], 4)} | "
-                                 f"{_g(row['mu'], 4)} |")
+                    lines.append(f"| {row['rank']} | {row['factor']} | "
+                                 f"{md_cell(row['mu_star'], 4)} | "
+                                 f"{md_cell(row['mu_star_conf'], 4)} | "
+                                 f"{md_cell(row['sigma'], 4)} | "
+                                 f"{md_cell(row['mu'], 4)} |")
                 lines.append("")
         for n in names:
             if n.endswith(f"_{r.name}.png"):
@@ -256,75 +252,6 @@ def prepare_folder(res: SensitivityResult, out: Path | None,
                yaml.safe_dump(res.cfg.model_dump(mode="json"), sort_keys=False))
     write_manifest(res, overrides, status="running")
     return folder
-
-
-def run_sensitivity(
-    cfg: SensitivityConfig,
-    out: Path | None = None,
-    method: str | None = None,
-    n: int | None = None,
-    *,
-    n_jobs: int | None = None,
-    backend: str | None = None,
-    scheduler: str | None = None,
-    force: bool = False,
-    progress: bool = True,
-    cache_dir: Path | None = None,
-    base_dir: Path | None = None,
-    source: str = "config",
-    overrides: Sequence[tuple[str, Any]] = (),
-    write: bool = True,
-    reuse_finished: bool = False,
-    log: Callable[[str], None] | None = None,
-) -> SensitivityResult:
-    """Run a sensitivity study end to end and write its folder (``write`` False: nothing is
-    written, and no job cache unless ``cache_dir`` is given).
-
-    out        output folder; None: ``results/sensitivity/<name>/<stamp>_<hash>/``. An
-               existing folder is reused only if it holds an unfinished study of the same
-               config, method and n
-               (resumed: finished samples come from the job cache)
-    cache_dir  job cache; None: ``sweep_report.default_cache_dir(out)`` when writing
-
-    reuse_finished  ``out`` belongs to a run being resumed (``ema reproduce``): if it holds the
-               finished study of these very inputs, it is kept as it is (the indices are
-               recomputed from the job cache, nothing is written)
-
-    On Ctrl-C the manifest says ``interrupted`` and the exception propagates; the finished
-    samples are in the job cache for the rerun.
-    """
-    reused = False
-    if write:
-        method, n = resolve_method(cfg, method, n)
-        if cache_dir is None:
-            cache_dir = default_cache_dir(out)
-        fp = fingerprint(cfg, method, n)
-        if reuse_finished and out is not None and finished_study(Path(out), fp):
-            write, reused = False, True
-        else:
-            check_output(out, COMMAND, fp, resume=True)
-
-    def on_start(res: SensitivityResult) -> None:
-        if write:
-            prepare_folder(res, out, overrides)
-
-    def on_finish(res: SensitivityResult, aborted: bool) -> None:
-        if res.folder is None:
-            return
-        if aborted:
-            write_manifest(res, overrides)
-            return
-        write_outputs(res, overrides)
-        if res.complete:
-            finish_output(res.folder)
-
-    res = compute_sensitivity(cfg, method, n, n_jobs=n_jobs, backend=backend,
-                              scheduler=scheduler, force=force, progress=progress,
-                              cache_dir=cache_dir, base_dir=base_dir, source=source,
-                              on_start=on_start, on_finish=on_finish, log=log)
-    if reused:
-        res.folder = Path(out) if out is not None else None
-    return res
 
 
 def finished_study(folder: Path, fp: str) -> bool:

@@ -10,6 +10,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ema_cli.report.figures import subplots
+from ema_cli.report.markdown import md_table
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
 from ema_cli.units import DEG
 
@@ -90,22 +91,6 @@ def scenario_figure(res: Any, s: int) -> Figure:
     return fig
 
 
-def _g(v: Any) -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return ""
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    return str(v)
-
-
-def _table(df: Any) -> str:
-    cols = list(df.columns)
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for _, r in df.iterrows():
-        lines.append("| " + " | ".join(_g(r[c]) for c in cols) + " |")
-    return "\n".join(lines)
-
-
 def tuning_markdown(res: Any, figures: list[str]) -> str:
     """tuning.md: the verdict, the tuned values, the cost before and after, every constraint's
     value and limit, the runs, and the figures."""
@@ -146,12 +131,12 @@ def tuning_markdown(res: Any, figures: list[str]) -> str:
               "`scenarios/NAME.yaml` (tuned), `scenarios/NAME.before.yaml` and "
               "`scenarios/NAME.default.yaml` are each scenario with the three controllers, "
               "every one runnable with `ema simulate`.", "",
-              "## Scenarios", "", _table(res.scenarios_frame()), "",
+              "## Scenarios", "", md_table(res.scenarios_frame()), "",
               "## Constraints (value of each controller in the limit's unit)", "",
-              _table(res.constraints_frame()), "",
+              md_table(res.constraints_frame()), "",
               "Always: no scenario may diverge and the closed linear loop must be stable. "
               "Margins are those of the linearised loops (position and speed, the smaller).",
-              "", "## Runs", "", _table(res.runs_frame()), "", "## Figures", ""]
+              "", "## Runs", "", md_table(res.runs_frame()), "", "## Figures", ""]
     lines += [f"![{f}]({f})" for f in figures]
     return "\n".join(lines) + "\n"
 

@@ -53,6 +53,8 @@ bit the run done in one call. A run done in one call may pass an empty ``S``.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
 from ema_cli._numba import literally, njit, prange
@@ -171,6 +173,75 @@ _N_ROWS = _REC0 + N_SIGNALS
 N_ROWS = _N_ROWS  # rows of a work array (the state array S of the entry points has this many)
 ALIVE_ROW = _D_ALIVE  # the row of S that is 0 once a lane has diverged
 
+LANE_PARAMS: tuple[tuple[str, int, bool], ...] = (
+    ("m", _M, False),
+    ("inv_m", _D_INVM, False),
+    ("inv_l", _D_INVL, False),
+    ("inv_jm", _D_INVJM, False),
+    ("inv_jl", _D_INVJL, False),
+    ("r_a", _R, False),
+    ("kt", _KT, False),
+    ("ke", _KE, False),
+    ("bm", _BM, False),
+    ("bl", _BL, False),
+    ("kl", _KL, False),
+    ("alpha", _ALPHA, False),
+    ("c", _C, False),
+    ("contact", _D_CONTACT, True),
+    ("kpp", _KPP, False),
+    ("kps", _KPS, False),
+    ("kis", _KIS, False),
+    ("sat1", _SAT1, False),
+    ("sat2", _SAT2, False),
+    ("sat3", _SAT3, False),
+    ("d1", _D1, False),
+    ("d3", _D3, False),
+    ("d4", _D4, False),
+    ("q_pos", _QPOS, False),
+    ("q_speed", _QSPEED, False),
+    ("t_const", _TLOAD, False),
+    ("k_h", _KH, False),
+    ("fr", _FRIC, True),
+    ("fc", _FC, False),
+    ("fs", _FS, False),
+    ("vs", _VS, False),
+    ("delta", _DELTA, False),
+    ("sig0", _SIG0, False),
+    ("sig1", _SIG1, False),
+    ("sig2", _SIG2, False),
+    ("ns", _D_NS, False),
+    ("ts", _TS, False),
+    ("locked", _LOCKED, True),
+    ("is_step", _D_ISSTEP, True),
+    ("step", _D_STEP, False),
+    ("t_step", _D_TSTEP, False),
+    ("inv_qp", _D_INVQP, False),
+    ("inv_qs", _D_INVQS, False),
+    ("fb", _FB, False),
+    ("dzi", _DZI, False),
+    ("dzib", _DZIB, False),
+    ("ffc", _FFC, False),
+    ("ffs", _FFS, False),
+    ("ffv", _FFV, False),
+    ("ffs2", _FFS2, False),
+    ("ffb", _FFB, False),
+    ("nw", _D_NW, False),
+    ("nc", _D_NC, False),
+    ("nz", _NZETA, False),
+    ("ffsig0", _FFSIG0, False),
+    ("ffsig1", _FFSIG1, False),
+    ("inv_tau", _D_INVTAU, False),
+    ("hc", _HC, False),
+    ("hck", _D_HCK, False),
+)
+"""The lane parameter bundle :func:`_lane_params` builds, one entry per field: (name, row of
+the work array W, read as a flag: ``row != 0``). Names as in ``model.params`` lower-cased where
+they are parameters (``kl`` is ``kL``, ``sig0`` is ``sigma0``, ``t_const`` is ``T_load``), the
+derived constants as their rows ``_D_*`` say (``inv_m`` is 1/m, ``ns`` the steps per controller
+sample)."""
+LaneParams = namedtuple("LaneParams", [f[0] for f in LANE_PARAMS])  # type: ignore[misc]
+"""The parameters of one lane, by name (numba passes it as a struct: no cost over a tuple)."""
+
 W_RUNAWAY = 1.0e5  # |w_m| above this is a runaway [rad/s] (~1e6 rpm)
 THETA_RUNAWAY = 1.0e4  # |theta_L| above this is a runaway [rad]
 I_RUNAWAY = 1.0e5  # |i| above this is a runaway [A]
@@ -188,32 +259,31 @@ def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, l
            xn2, tfh):
     """Time derivatives of (theta_m, w_m, i, theta_L, w_L, xI) for one lane (bristle torque
     ``tf_b``, held voltage ``uh``, notch state ``xn2`` and the friction observer's held bristle
-    torque ``tfh`` given). ``prm`` is the tuple built by :func:`_lane_params`."""
-    (m, inv_m, inv_l, inv_jm, inv_jl, r_a, kt, ke, bm, bl, kl, alpha, c, contact, kpp, kps, kis,
-     sat1, sat2, sat3, d1, d3, d4, q_pos, q_speed, t_const, k_h, _, _, _, _, delta, _, _, _, _,
-     _, _, _, _, _, inv_qp, inv_qs, fb, dzi, dzib, ffc, ffs, ffv, ffs2, ffb, _, nc, _, ffsig0,
-     _, inv_tau, hc, hck) = prm
-    if not extras:  # no quantisers (a constant at each call site)
-        q_pos = 0.0
-        q_speed = 0.0
-    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs,
-                                 th_m * inv_m, fb)
-    e_w, u_unsat, u_dem = cascade_nb(r, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
+    torque ``tfh`` given). ``prm`` is the lane's :class:`LaneParams`."""
+    q_pos = prm.q_pos if extras else 0.0  # no quantisers (a constant at each call site)
+    q_speed = prm.q_speed if extras else 0.0
+    th_meas, w_meas = sensors_nb(th_l, w_m, prm.d4, prm.d3, q_pos, q_speed, prm.inv_qp,
+                                 prm.inv_qs, th_m * prm.inv_m, prm.fb)
+    e_w, u_unsat, u_dem = cascade_nb(r, th_meas, w_meas, x_i, prm.m, prm.kpp, prm.kps, prm.kis,
+                                     prm.sat1, prm.sat2)
     if extras:  # friction compensation, then the notch (held state)
-        t_ff = (tfh + ffs2 * w_meas if ffsig0 > 0.0
-                else friction_ff_nb(e_w + w_meas, w_meas, ffc, ffs, ffv, delta, ffs2, ffb))
-        u_unsat = u_unsat + r_a / kt * t_ff + nc * xn2
-        u_dem = saturate_nb(u_unsat, sat2)
+        t_ff = (tfh + prm.ffs2 * w_meas if prm.ffsig0 > 0.0
+                else friction_ff_nb(e_w + w_meas, w_meas, prm.ffc, prm.ffs, prm.ffv, prm.delta,
+                                    prm.ffs2, prm.ffb))
+        u_unsat = u_unsat + prm.r_a / prm.kt * t_ff + prm.nc * xn2
+        u_dem = saturate_nb(u_unsat, prm.sat2)
     u = uh if disc else u_dem
     if extras:
-        u = deadzone_inverse_nb(u, dzi, dzib)
-    u_amp = 0.0 if locked else dead_zone_nb(u, d1)
-    t_shaft = shaft_torque_nb(kl, alpha, c, contact, inv_tau, hc, hck, th_m * inv_m - th_l,
-                              w_m * inv_m - w_l)
-    di = armature_rate_nb(i, w_m, u_amp, r_a, inv_l, ke, sat3)
-    dxi = 0.0 if disc else integral_rate_nb(e_w, u_unsat, sat2)
-    dw_m = motor_accel_nb(i, w_m, t_shaft, tf_b + visc * w_m, kt, bm, inv_m, inv_jm)
-    dw_l = load_accel_nb(w_l, t_shaft, load_torque_nb(th_l, t_const, t_prof, k_h), bl, inv_jl)
+        u = deadzone_inverse_nb(u, prm.dzi, prm.dzib)
+    u_amp = 0.0 if locked else dead_zone_nb(u, prm.d1)
+    t_shaft = shaft_torque_nb(prm.kl, prm.alpha, prm.c, prm.contact, prm.inv_tau, prm.hc,
+                              prm.hck, th_m * prm.inv_m - th_l, w_m * prm.inv_m - w_l)
+    di = armature_rate_nb(i, w_m, u_amp, prm.r_a, prm.inv_l, prm.ke, prm.sat3)
+    dxi = 0.0 if disc else integral_rate_nb(e_w, u_unsat, prm.sat2)
+    dw_m = motor_accel_nb(i, w_m, t_shaft, tf_b + visc * w_m, prm.kt, prm.bm, prm.inv_m,
+                          prm.inv_jm)
+    dw_l = load_accel_nb(w_l, t_shaft, load_torque_nb(th_l, prm.t_const, t_prof, prm.k_h),
+                         prm.bl, prm.inv_jl)
     if locked:
         return 0.0, 0.0, 0.0, w_l, dw_l, 0.0
     return w_m, dw_m, di, w_l, dw_l, dxi
@@ -221,19 +291,20 @@ def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, l
 
 @njit(cache=True, forceinline=True, error_model="numpy")
 def _lane_params(W, j):
-    """The parameters of lane ``j`` as one flat tuple: the first 27 in the order :func:`_rates`
-    unpacks, then those only :func:`_step` reads."""
-    return (W[_M, j], W[_D_INVM, j], W[_D_INVL, j], W[_D_INVJM, j], W[_D_INVJL, j], W[_R, j],
-            W[_KT, j], W[_KE, j], W[_BM, j], W[_BL, j], W[_KL, j], W[_ALPHA, j],
-            W[_C, j], W[_D_CONTACT, j] != 0.0, W[_KPP, j], W[_KPS, j], W[_KIS, j],
-            W[_SAT1, j], W[_SAT2, j], W[_SAT3, j], W[_D1, j], W[_D3, j], W[_D4, j],
-            W[_QPOS, j], W[_QSPEED, j], W[_TLOAD, j], W[_KH, j],
-            W[_FRIC, j] != 0.0, W[_FC, j], W[_FS, j], W[_VS, j], W[_DELTA, j], W[_SIG0, j],
-            W[_SIG1, j], W[_SIG2, j], W[_D_NS, j], W[_TS, j], W[_LOCKED, j] != 0.0,
-            W[_D_ISSTEP, j] != 0.0, W[_D_STEP, j], W[_D_TSTEP, j], W[_D_INVQP, j],
-            W[_D_INVQS, j], W[_FB, j], W[_DZI, j], W[_DZIB, j], W[_FFC, j], W[_FFS, j],
-            W[_FFV, j], W[_FFS2, j], W[_FFB, j], W[_D_NW, j], W[_D_NC, j], W[_NZETA, j],
-            W[_FFSIG0, j], W[_FFSIG1, j], W[_D_INVTAU, j], W[_HC, j], W[_D_HCK, j])
+    """The parameters of lane ``j`` as a :class:`LaneParams` (fields in :data:`LANE_PARAMS`
+    order: ``tests/unit/test_kernel_bundles.py`` checks each field reads its row)."""
+    return LaneParams(W[_M, j], W[_D_INVM, j], W[_D_INVL, j], W[_D_INVJM, j], W[_D_INVJL, j],
+                      W[_R, j], W[_KT, j], W[_KE, j], W[_BM, j], W[_BL, j], W[_KL, j],
+                      W[_ALPHA, j], W[_C, j], W[_D_CONTACT, j] != 0.0, W[_KPP, j], W[_KPS, j],
+                      W[_KIS, j], W[_SAT1, j], W[_SAT2, j], W[_SAT3, j], W[_D1, j], W[_D3, j],
+                      W[_D4, j], W[_QPOS, j], W[_QSPEED, j], W[_TLOAD, j], W[_KH, j],
+                      W[_FRIC, j] != 0.0, W[_FC, j], W[_FS, j], W[_VS, j], W[_DELTA, j],
+                      W[_SIG0, j], W[_SIG1, j], W[_SIG2, j], W[_D_NS, j], W[_TS, j],
+                      W[_LOCKED, j] != 0.0, W[_D_ISSTEP, j] != 0.0, W[_D_STEP, j], W[_D_TSTEP, j],
+                      W[_D_INVQP, j], W[_D_INVQS, j], W[_FB, j], W[_DZI, j], W[_DZIB, j],
+                      W[_FFC, j], W[_FFS, j], W[_FFV, j], W[_FFS2, j], W[_FFB, j], W[_D_NW, j],
+                      W[_D_NC, j], W[_NZETA, j], W[_FFSIG0, j], W[_FFSIG1, j], W[_D_INVTAU, j],
+                      W[_HC, j], W[_D_HCK, j])
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -300,71 +371,67 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     x = (theta_m, w_m, i, theta_L, w_L, z, xI); acc = the 22 metric accumulators (row order of
     ``_A_*``); ctl = (sample countdown, held voltage, alive, step where it diverged); inp =
     (reference at t, t+dt/2, t+dt, its velocity at t, load profile at t, t+dt/2, t+dt); lp =
-    :func:`_lane_params`. ``fric`` (:func:`variant_codes`) 0 skips the LuGre update (no lane has
-    friction), 1 takes the Stribeck exponent as 1; ``extras`` False skips the digital
-    controller, the quantisers, the locked motor and the compensators (none is in use); both are
-    constants at each call site, so a variant carries only what it needs.
+    :func:`_lane_params` (a :class:`LaneParams`). ``fric`` (:func:`variant_codes`) 0 skips the
+    LuGre update (no lane has friction), 1 takes the Stribeck exponent as 1; ``extras`` False
+    skips the digital controller, the quantisers, the locked motor and the compensators (none
+    is in use); both are constants at each call site, so a variant carries only what it needs.
     Returns (x+, acc+, ctl+, (u_dem, u_amp, T, Tf, T_load) at t_k).
     """
-    (m, inv_m, _, _, _, _, _, _, _, _, kl, alpha, c, contact, kpp, kps, kis, sat1, sat2, sat3,
-     d1, d3, d4, q_pos, q_speed, t_const, k_h, fr, fc, fs, vs, delta, sig0, sig1, sig2, ns, ts,
-     locked, is_step, step, t_step, inv_qp, inv_qs, fb, dzi, dzib, ffc, ffs, ffv, ffs2, ffb, nw,
-     nc, nz, ffsig0, ffsig1, inv_tau, hc, hck) = lp
+    ns = lp.ns if extras else 0.0  # no digital controller, locked motor nor quantisers
+    locked = lp.locked if extras else False  # (constants at each call site)
+    q_pos = lp.q_pos if extras else 0.0
+    q_speed = lp.q_speed if extras else 0.0
+    delta = 1.0 if fric == 1 else lp.delta  # fric 1: every lane's exponent (pow_nb folds)
     th_m, w_m, i, th_l, w_l, z, x_i = x
     (iae, ise, itae, iaev, isev, itaev, emax, evmax, ss, emin_o, emax_o, evmin_o, evmax_o, smax,
      t10, t50, t90, last_out, pki, pku, pkwl, pkt) = acc
     cnt, uh, alive, kend, xn1, xn2, zh = ctl
     r0, r1, r2, rv, l0, l1, l2 = inp
-    if not extras:
-        ns = 0.0
-        locked = False
-        q_pos = 0.0
-        q_speed = 0.0
     t = k * dt
     wgt = 0.5 * dt if (k == 0 or k == n_steps) else dt
     # --- LuGre bristle step (exact for frozen w_m), held over the RK4 stages
-    if fric == 1:
-        delta = 1.0  # every lane's exponent (a constant here: pow_nb folds to its argument)
     if fric > 0:
-        zb, tb = bristle_step_nb(z, w_m, dt, fc, fs, vs, delta, sig0, sig1)
-        z_new = zb if fr else 0.0
-        tf_b = tb if fr else 0.0
-        visc = sig2 if fr else 0.0
+        zb, tb = bristle_step_nb(z, w_m, dt, lp.fc, lp.fs, lp.vs, delta, lp.sig0, lp.sig1)
+        z_new = zb if lp.fr else 0.0
+        tf_b = tb if lp.fr else 0.0
+        visc = lp.sig2 if lp.fr else 0.0
     else:
         z_new = 0.0
         tf_b = 0.0
         visc = 0.0
     # --- controller at t_k (digital: sample, hold, integrate)
-    th_meas, w_meas = sensors_nb(th_l, w_m, d4, d3, q_pos, q_speed, inv_qp, inv_qs,
-                                 th_m * inv_m, fb)
-    e_w, u_unsat, u_dem = cascade_nb(r0, th_meas, w_meas, x_i, m, kpp, kps, kis, sat1, sat2)
+    th_meas, w_meas = sensors_nb(th_l, w_m, lp.d4, lp.d3, q_pos, q_speed, lp.inv_qp, lp.inv_qs,
+                                 th_m * lp.inv_m, lp.fb)
+    e_w, u_unsat, u_dem = cascade_nb(r0, th_meas, w_meas, x_i, lp.m, lp.kpp, lp.kps, lp.kis,
+                                     lp.sat1, lp.sat2)
     xn1_next, xn2_next = xn1, xn2
     zh_next = zh
     tfh = 0.0
     if extras:  # friction compensation (feed-forward or LuGre observer), then the notch
-        r_a, kt = lp[5], lp[6]
-        if ffsig0 > 0.0:  # the observer's bristle state, advanced like the plant's (held)
-            zh_next, tfh = bristle_step_nb(zh, w_meas, dt, ffc, max(ffs, ffc), ffv, delta,
-                                           ffsig0, ffsig1)
-            t_ff = tfh + ffs2 * w_meas
+        r_a, kt = lp.r_a, lp.kt
+        if lp.ffsig0 > 0.0:  # the observer's bristle state, advanced like the plant's (held)
+            zh_next, tfh = bristle_step_nb(zh, w_meas, dt, lp.ffc, max(lp.ffs, lp.ffc), lp.ffv,
+                                           delta, lp.ffsig0, lp.ffsig1)
+            t_ff = tfh + lp.ffs2 * w_meas
         else:
-            t_ff = friction_ff_nb(e_w + w_meas, w_meas, ffc, ffs, ffv, delta, ffs2, ffb)
+            t_ff = friction_ff_nb(e_w + w_meas, w_meas, lp.ffc, lp.ffs, lp.ffv, delta, lp.ffs2,
+                                  lp.ffb)
         u_pre = u_unsat + r_a / kt * t_ff
-        u_unsat = u_pre + nc * xn2
-        u_dem = saturate_nb(u_unsat, sat2)
-        if nw > 0.0:
-            xn1_next, xn2_next = notch_update_nb(xn1, xn2, u_pre, nw, nz, dt)
+        u_unsat = u_pre + lp.nc * xn2
+        u_dem = saturate_nb(u_unsat, lp.sat2)
+        if lp.nw > 0.0:
+            xn1_next, xn2_next = notch_update_nb(xn1, xn2, u_pre, lp.nw, lp.nz, dt)
     disc = ns > 0.0
     sample = disc and cnt == 0.0
     uh = u_dem if sample else uh
-    x_i_next = integral_update_nb(x_i, e_w, u_unsat, sat2, ts) if sample else x_i
+    x_i_next = integral_update_nb(x_i, e_w, u_unsat, lp.sat2, lp.ts) if sample else x_i
     cnt = ns - 1.0 if sample else cnt - 1.0
     u_out = 0.0 if locked else (uh if disc else u_dem)
     if extras:
-        u_out = deadzone_inverse_nb(u_out, dzi, dzib)
-    u_amp = dead_zone_nb(u_out, d1)
-    t_shaft = shaft_torque_nb(kl, alpha, c, contact, inv_tau, hc, hck, th_m * inv_m - th_l,
-                              w_m * inv_m - w_l)
+        u_out = deadzone_inverse_nb(u_out, lp.dzi, lp.dzib)
+    u_amp = dead_zone_nb(u_out, lp.d1)
+    t_shaft = shaft_torque_nb(lp.kl, lp.alpha, lp.c, lp.contact, lp.inv_tau, lp.hc, lp.hck,
+                              th_m * lp.inv_m - th_l, w_m * lp.inv_m - w_l)
     # --- metrics (trapezoid weights over the full-resolution samples)
     e = r0 - th_l
     ev = rv - w_l
@@ -389,8 +456,8 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     pku = max(pku, abs(u_out))
     pkwl = max(pkwl, abs(w_l))
     pkt = max(pkt, abs(t_shaft))
-    act = is_step and t >= t_step
-    s = th_l / step
+    act = lp.is_step and t >= lp.t_step
+    s = th_l / lp.step
     smax = max(smax, s) if act else smax
     t10 = t if (act and t10 != t10 and s >= 0.1) else t10
     t50 = t if (act and t50 != t50 and s >= 0.5) else t50
@@ -398,7 +465,7 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     last_out = k if (act and abs(s - 1.0) > SETTLE_BAND) else last_out
     acc = (iae, ise, itae, iaev, isev, itaev, emax, evmax, ss, emin_o, emax_o, evmin_o, evmax_o,
            smax, t10, t50, t90, last_out, pki, pku, pkwl, pkt)
-    out = (u_out, u_amp, t_shaft, tf_b + visc * w_m, load_torque_nb(th_l, t_const, l0, k_h))
+    out = (u_out, u_amp, t_shaft, tf_b + visc * w_m, load_torque_nb(th_l, lp.t_const, l0, lp.k_h))
     # --- RK4 step (reference and load profile at the stage times; bristle torque held)
     x_i = x_i_next
     h = dt
@@ -422,7 +489,7 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     th_l += h6 * (d1 + 2.0 * d2 + 2.0 * d3 + d4)
     w_l += h6 * (e1 + 2.0 * e2 + 2.0 * e3 + e4)
     x_i += h6 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
-    i = min(max(i, -sat3), sat3)
+    i = min(max(i, -lp.sat3), lp.sat3)
     ok = (abs(w_m) < W_RUNAWAY and abs(th_l) < THETA_RUNAWAY and abs(i) < I_RUNAWAY
           and abs(th_m) < _INF and abs(w_l) < _INF and abs(x_i) < _INF and abs(z_new) < _INF)
     dies = alive != 0.0 and not ok and k < n_steps
@@ -443,7 +510,7 @@ def _advance(W, k, dt, n_steps, in_ss, in_osc, record, fric_chunk, extras):
         xn, acc, ctl, out = _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc,
                                   fric_chunk, extras)
         if record:
-            _record(W, j, x, inp, out, lp[0])
+            _record(W, j, x, inp, out, lp.m)
         _store(W, j, xn, acc, ctl)
 
 
@@ -615,7 +682,7 @@ def _run_one(W, ref_pos, ref_vel, load_half, q, dt, n_steps, k0, k1, dec, sig, o
                                   fric, extras)
         if dec > 0 and countdown == 0:
             countdown = dec
-            _record(W, 0, x, inp, out, lp[0])
+            _record(W, 0, x, inp, out, lp.m)
             for s in range(N_SIGNALS):
                 sig[o, k // dec, s] = W[_REC0 + s, 0]
         countdown -= 1

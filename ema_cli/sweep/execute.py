@@ -103,14 +103,25 @@ def chunk_sizes(n: int, n_steps: int, workers: int, backend: str, n_out: int,
     return [size] * full + ([rest] if rest else [])
 
 
+Source = InputSignal | Sampler
+"""A chunk's reference: the plan's :class:`Sampler` (prepared once per run, sent to workers
+with each chunk) or an :class:`InputSignal` (prepared once per process)."""
+
+
 @functools.lru_cache(maxsize=4)
-def _reference(signal: InputSignal, dt: float, n_steps: int) -> Sampler:
-    """The signal prepared for the grid (a CSV profile read once), once per process: a worker
-    gets many chunks of one sweep. The kernel samples it per time chunk."""
+def _prepared(signal: Source, dt: float, n_steps: int) -> Sampler:
+    """An InputSignal prepared for the grid once per process (a CSV profile read once)."""
     return sampler(signal, dt, n_steps)
 
 
-def run_chunk(P: np.ndarray, signal: InputSignal, dt: float, n_steps: int, dec: int,
+def _reference(source: Source, dt: float, n_steps: int) -> Sampler:
+    """``source`` ready for the grid: a Sampler as it is, an InputSignal prepared once."""
+    if isinstance(source, Sampler):
+        return source
+    return _prepared(source, dt, n_steps)
+
+
+def run_chunk(P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
               threads: int) -> ChunkOutput:
     """Worker side: one kernel call on the parameter matrix ``P`` (SI) with ``threads`` threads.
 
@@ -137,24 +148,35 @@ def run_chunk(P: np.ndarray, signal: InputSignal, dt: float, n_steps: int, dec: 
         numba.set_num_threads(previous)
 
 
-def warm_kernel(signal: InputSignal, dt: float, threads: int) -> float:
+def warm_kernel(signal: Source, dt: float, threads: int) -> float:
     """Compile or load the kernel entry points ``threads`` selects (serial or prange; one lane
     and SIMD lanes), here, before workers start, with a tiny run of each (which also starts
-    numba's thread pool) [s]."""
+    numba's thread pool) [s]. A Sampler's first steps are taken as they are (not sampled
+    again)."""
     from ema_cli.model.params import resolve, to_row
     from ema_cli.sim.kernel import LANES
+    from ema_cli.sim.signals import Reference
 
     t0 = time.perf_counter()
     P = np.array([to_row(resolve())])
+    ref: Source | Reference = signal
+    if isinstance(signal, Sampler):
+        pos, vel, load = signal.chunk(0, min(WARM_STEPS + 1, signal.n_steps + 1))
+        n = len(vel) - 1
+        ref = Reference(pos[:2 * n + 1], vel, signal.step_info,
+                        None if load is None else load[:2 * n + 1])
+        steps = n
+    else:
+        steps = WARM_STEPS
     for lanes in (1, LANES):
-        simulate_batch(P, [signal], None, dt, WARM_STEPS, 1, parallel=threads > 0, lanes=lanes)
+        simulate_batch(P, [ref], None, dt, steps, 1, parallel=threads > 0, lanes=lanes)
     return time.perf_counter() - t0
 
 
 OnChunk = Callable[[int, ChunkOutput], None]
 
 
-def execute(chunks: Sequence[np.ndarray], signal: InputSignal, dt: float, n_steps: int, dec: int,
+def execute(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int, dec: int,
             backend: str, workers: int, on_chunk: OnChunk, scheduler: str | None = None) -> None:
     """Run every chunk (a parameter matrix) and call ``on_chunk(i, output)`` in the parent as
     each finishes (in completion order). KeyboardInterrupt stops the workers and propagates.
@@ -175,12 +197,12 @@ def execute(chunks: Sequence[np.ndarray], signal: InputSignal, dt: float, n_step
     raise EmaError(f"unknown backend '{backend}'; expected one of {', '.join(BACKENDS)}")
 
 
-def _indexed(i: int, P: np.ndarray, signal: InputSignal, dt: float, n_steps: int, dec: int,
+def _indexed(i: int, P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
              threads: int) -> tuple[int, ChunkOutput]:
     return i, run_chunk(P, signal, dt, n_steps, dec, threads)
 
 
-def _execute_joblib(chunks: Sequence[np.ndarray], signal: InputSignal, dt: float, n_steps: int,
+def _execute_joblib(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int,
                     dec: int, workers: int, on_chunk: OnChunk, backend: str | None,
                     threads: int) -> None:
     """joblib over the chunks; ``backend`` None: the one set by ``joblib.parallel_config``."""
@@ -213,7 +235,7 @@ def check_dask(scheduler: str | None) -> None:
         raise EmaError(DASK_HINT) from None
 
 
-def _execute_dask(chunks: Sequence[np.ndarray], signal: InputSignal, dt: float, n_steps: int,
+def _execute_dask(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int,
                   dec: int, on_chunk: OnChunk, scheduler: str | None) -> None:
     check_dask(scheduler)
     from dask.distributed import Client

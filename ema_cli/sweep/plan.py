@@ -27,7 +27,7 @@ from ema_cli.hashing import content_hash
 from ema_cli.model.nonlinearities import OFF, lookup
 from ema_cli.model.params import BY_NAME, to_row
 from ema_cli.sim.runner import plan_steps, resolution_warnings, simulate_batch
-from ema_cli.sim.signals import InputSignal, sampler
+from ema_cli.sim.signals import InputSignal, Sampler, sampler
 from ema_cli.sim.tables import MET, SIG, SIGNALS
 from ema_cli.sweep.expand import AxisPoint, JobSpec, expand, neutral_value
 from ema_cli.units import DEG
@@ -127,7 +127,11 @@ class Job:
 
 @dataclass
 class Plan:
-    """A sweep resolved to jobs, with its time grid and input signal (SI)."""
+    """A sweep resolved to jobs, with its time grid and input signal (SI).
+
+    ``reference`` is the input signal prepared for the grid once per run (a CSV profile read
+    once): planning, the kernel warm-up and every chunk sample it.
+    """
 
     cfg: StudyConfig
     jobs: list[Job]
@@ -141,6 +145,7 @@ class Plan:
     scales: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    reference: Sampler | None = None
 
     @property
     def key(self) -> str:
@@ -259,7 +264,7 @@ def check_parameters(cfg: StudyConfig, params: Mapping[str, float],
                 writer.setdefault(name, here)
 
 
-def _relative_scales(cfg: StudyConfig, base_params: dict[str, float], sig: InputSignal,
+def _relative_scales(cfg: StudyConfig, base_params: dict[str, float], ref: Sampler,
                      dt: float, n_steps: int, dec: int) -> dict[str, float]:
     """Peak |signal| at each dead-zone location in the baseline run, in the location's unit.
 
@@ -271,7 +276,6 @@ def _relative_scales(cfg: StudyConfig, base_params: dict[str, float], sig: Input
               for t in a.targets}
     if not wanted:
         return {}
-    ref = sampler(sig, dt, n_steps)
     res = simulate_batch(np.array([to_row(base_params)]), [ref], None, dt, n_steps, dec)
     peak_ref = ref.max_abs_position() / DEG
     assert res.signals is not None
@@ -367,6 +371,7 @@ def plan_sweep(cfg: StudyConfig, base_dir: Path | None = None, source: str = "co
     record = cfg.outputs.needs_signals
     n_steps, dec = plan_steps(sim.duration_s, sim.dt_s, sim.output_interval_s)
     sig = input_signal(cfg.input, base_dir, cfg.load)
+    ref = sampler(sig, sim.dt_s, n_steps)  # the one sampling of this run's reference
     axes = [_axis_info(k, a) for k, a in enumerate(cfg.sweep.axes)]
     check_columns(axes, source)
 
@@ -378,7 +383,7 @@ def plan_sweep(cfg: StudyConfig, base_dir: Path | None = None, source: str = "co
     except EmaError as exc:
         raise EmaError(f"{source}: the baseline cannot be resolved: {exc.message}") from None
     check_parameters(cfg, plain, source)
-    scales = _relative_scales(cfg, base_params, sig, sim.dt_s, n_steps, dec)
+    scales = _relative_scales(cfg, base_params, ref, sim.dt_s, n_steps, dec)
 
     fixed = {"sim": simulator_fingerprint(), "signal": signal_identity(sig), "dt": sim.dt_s,
              "n_steps": n_steps}
@@ -405,4 +410,5 @@ def plan_sweep(cfg: StudyConfig, base_dir: Path | None = None, source: str = "co
         notes.append(f"the baseline equals job {twin.label!r}; it is not run twice")
         jobs = [dataclasses.replace(j, index=i) for i, j in enumerate(jobs[1:])]
     return Plan(cfg, jobs, axes, sig, sim.dt_s, sim.duration_s, n_steps,
-                dec if record else 0, sim.output_interval_s, scales, sorted(warnings), notes)
+                dec if record else 0, sim.output_interval_s, scales, sorted(warnings), notes,
+                ref)

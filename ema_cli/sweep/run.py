@@ -2,9 +2,10 @@
 
 ``compute_sweep`` returns a :class:`SweepResult`: the metrics table (one row per job) and
 access to each job's decimated time series. It writes nothing but the job cache (and only when
-given one); the output folder is written by ``report.sweep_report.run_sweep`` (the library entry
-point of ``ema sweep`` and of the paper reproduction) through the ``on_start`` /
-``on_signals`` / ``on_finish`` hooks.
+given one); ``api.study.run_sweep`` (the one route of ``ema sweep`` and of the paper
+reproduction) plans the config once and hands this the plan and the output folder's sink
+(``report.sweep_report.SweepFolder``) as the ``on_start`` / ``on_signals`` / ``on_finish``
+hooks.
 """
 
 from __future__ import annotations
@@ -13,18 +14,16 @@ import contextlib
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.progress import announce_size
 from ema_cli.sim.runner import check_memory
-from ema_cli.sim.tables import MET, METRICS, N_METRICS, N_SIGNALS, SIGNALS
+from ema_cli.sim.tables import MET, N_METRICS, N_SIGNALS
 from ema_cli.sweep.cache import JobCache, SignalsRule, signals_rule
 from ema_cli.sweep.execute import (
     ChunkOutput,
@@ -35,159 +34,30 @@ from ema_cli.sweep.execute import (
     resolve_workers,
     warm_kernel,
 )
-from ema_cli.sweep.plan import Job, Plan, plan_sweep
+from ema_cli.sweep.plan import Plan, plan_sweep
+from ema_cli.sweep.result import (
+    DIVERGED,
+    FAILED,
+    JOB_COLUMN,
+    OK,
+    PENDING,
+    TIME_COLUMN,
+    SweepResult,
+    metrics_frame,
+    read_timeseries,
+)
 
-OK, DIVERGED, FAILED, PENDING = "ok", "diverged", "failed", "pending"
-"""Job states: finished (ok or diverged), failed (error text in the manifest), not run."""
+__all__ = ["DIVERGED", "FAILED", "JOB_COLUMN", "OK", "PENDING", "TIME_COLUMN", "OnSignals",
+           "SweepResult", "compute_sweep", "metrics_frame", "read_timeseries"]
+
 PROGRESS_REFRESH_PER_S = 4  # progress bar refresh rate [1/s]
 CACHED_SIGNAL_BATCH_BYTES = 64 * 2**20  # cached signals read (and handed on) at a time [bytes]
-JOB_COLUMN, TIME_COLUMN = "job", "t_s"
-"""The job-id and time columns of a sweep's signals table (``signals.parquet``)."""
+TIMINGS = ("lookup", "warm", "execute", "kernel", "store", "signals", "writes")
+"""The timings every sweep reports (wall seconds; see ``SweepResult``)."""
 
 OnSignals = Callable[[Sequence[int], Sequence[int], np.ndarray], None]
 """``on_signals(jobs, rows, signals)``: job ``jobs[i]`` (index) recorded ``signals[rows[i]]``
 (SI, [n_out, N_SIGNALS])."""
-
-
-@dataclass
-class SweepResult:
-    """The outcome of a sweep.
-
-    ``metrics``: one row per job — ``job`` (id), ``label``, ``status`` (ok | diverged | failed
-    | pending), the swept values in the paper's units (see ``plan.axes`` for the columns), every
-    simulator metric in edge units (``sim.tables``), the content hash ``key`` and the ``error``
-    text of a failed job. ``folder`` is the output folder and ``signals_file`` the signals table
-    written there (None if nothing was written; the report layer sets them). ``cache`` is the
-    job cache (None: none was used). ``signals_rule`` says whether the recorded signals went
-    into the cache (``sweep.cache.signals_rule``; None: nothing recorded or no cache); the
-    signals of computed jobs not cached are kept in ``memory`` unless the caller streamed them
-    to a file (``keep_signals`` False). ``cache_corrupt`` counts the cache entries found
-    damaged, not used and recomputed (the warning is in ``run_warnings``, shown with the
-    plan's in ``warnings``). ``timings`` are wall seconds: plan, lookup, warm, execute, kernel
-    (summed over workers), store (cache writes), signals (the ``on_signals`` hook, i.e.
-    streaming signals.parquet as chunks finish: converting the signals to columns and waiting
-    for the encoder thread; it runs alongside the cache writes), writes (handling finished
-    chunks: both of those, as the sweep waited for them), outputs, total.
-    """
-
-    plan: Plan
-    metrics: pd.DataFrame
-    folder: Path | None
-    cache: JobCache | None
-    backend: str
-    workers: int
-    computed: int
-    cached: int
-    interrupted: bool = False
-    timings: dict[str, float] = field(default_factory=dict)
-    figures: list[Path] = field(default_factory=list)
-    pending: Any = None  # figures still being drawn (report.sweep_report.finish_sweep)
-    signals_file: Path | None = None
-    cache_corrupt: int = 0
-    memory: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-    signals_rule: SignalsRule | None = None
-    run_warnings: list[str] = field(default_factory=list)
-
-    @property
-    def jobs(self) -> list[Job]:
-        """The jobs, in metrics-table order."""
-        return self.plan.jobs
-
-    @property
-    def warnings(self) -> list[str]:
-        """What the user should be told: the plan's warnings, then the run's (damaged cache
-        entries)."""
-        return [*self.plan.warnings, *self.run_warnings]
-
-    @property
-    def signals_cached(self) -> bool:
-        """True if the recorded signals of computed jobs were stored in the job cache."""
-        return self.signals_rule is not None and self.signals_rule.cache
-
-    def counts(self) -> dict[str, int]:
-        """Jobs per status."""
-        s = self.metrics["status"]
-        return {k: int((s == k).sum()) for k in (OK, DIVERGED, FAILED, PENDING)}
-
-    def _job(self, job: str | int) -> Job:
-        if isinstance(job, int | np.integer):
-            return self.plan.jobs[int(job)]
-        for j in self.plan.jobs:
-            if j.id == job:
-                return j
-        raise KeyError(f"no job {job!r} in this sweep")
-
-    def signals(self, job: str | int) -> np.ndarray:
-        """SI signals[n_out, N_SIGNALS] of one job (columns: ``sim.tables.SIGNALS``).
-
-        From memory or the job cache (bit for bit what the kernel recorded), else from
-        ``signals_file`` (edge units converted back: equal to within rounding; the way back for
-        the jobs whose signals were not cached, see ``signals_rule``).
-        """
-        j = self._job(job)
-        if self.plan.dec <= 0:
-            raise EmaError("this sweep recorded no time series (outputs.timeseries and "
-                           "outputs.per_job_csv are false and no overlay figures were asked for)")
-        sig = self.memory.get(j.key)
-        if sig is None and self.cache is not None:
-            sig = self.cache.load_signals(j.key, self.plan.dec)
-        if sig is None and self.signals_file is not None:
-            ts = read_timeseries(self.signals_file, j.id)
-            sig = np.stack([ts[c.edge].to_numpy() / c.factor for c in SIGNALS], axis=1)
-        if sig is None:
-            raise EmaError(f"job {j.id} ({j.label}) has no recorded time series "
-                           f"(status {self.metrics['status'].iloc[j.index]})")
-        return sig
-
-    def timeseries(self, job: str | int) -> pd.DataFrame:
-        """Decimated time series of one job in edge units, ``t_s`` first (like ema simulate);
-        read from ``signals_file`` once it is written."""
-        j = self._job(job)
-        if self.signals_file is not None:
-            return read_timeseries(self.signals_file, j.id)
-        sig = self.signals(j.index)
-        data = {TIME_COLUMN: np.arange(sig.shape[0]) * (self.plan.dec * self.plan.dt)}
-        for k, c in enumerate(SIGNALS):
-            data[c.edge] = sig[:, k] * c.factor
-        return pd.DataFrame(data)
-
-
-def read_timeseries(path: Path, job_id: str) -> pd.DataFrame:
-    """One job's rows of a signals table (``t_s`` and every signal, edge units), in time order.
-
-    Reads only the row groups whose statistics may hold ``job_id``.
-    """
-    import pyarrow.parquet as pq
-
-    try:
-        table = pq.read_table(path, columns=[TIME_COLUMN, *(c.edge for c in SIGNALS)],
-                              filters=[(JOB_COLUMN, "=", job_id)])
-    except (OSError, ValueError) as exc:  # pyarrow's errors derive from these
-        raise EmaError(f"cannot read the signals table '{path}': {exc}", 1) from None
-    if table.num_rows == 0:
-        raise EmaError(f"the signals table '{path}' has no rows for job {job_id}", 1)
-    return table.to_pandas()
-
-
-def metrics_frame(plan: Plan, metrics: np.ndarray, status: Sequence[str],
-                  errors: Sequence[str]) -> pd.DataFrame:
-    """The metrics table: ids, labels, status, swept values, metrics (edge units), key, error."""
-    rows: dict[str, Any] = {
-        "job": [j.id for j in plan.jobs],
-        "label": [j.label for j in plan.jobs],
-        "status": list(status),
-    }
-    for info in plan.axes:
-        for c in info.columns:
-            rows[c] = [j.values.get(c, np.nan) for j in plan.jobs]
-    for k, c in enumerate(METRICS):
-        rows[c.edge] = metrics[:, k] * c.factor
-    rows["key"] = [j.key for j in plan.jobs]
-    rows["error"] = list(errors)
-    df = pd.DataFrame(rows)
-    df["diverged"] = df["status"] == DIVERGED
-    return df
-
 
 class _Progress:
     """A rich progress bar with ETA (or nothing when ``enabled`` is False)."""
@@ -231,7 +101,7 @@ class _Progress:
 
 
 def compute_sweep(
-    cfg: StudyConfig,
+    plan: Plan | StudyConfig,
     n_jobs: int | None = None,
     backend: str | None = None,
     force: bool = False,
@@ -249,7 +119,8 @@ def compute_sweep(
 ) -> SweepResult:
     """Run every job of a sweep (finished ones from the cache) and return the result.
 
-    cfg        validated StudyConfig (``load_config(path, overrides, StudyConfig)``)
+    plan       the resolved sweep (``sweep.plan.plan_sweep``: jobs, parameter rows, the sampled
+               reference), or a validated StudyConfig, planned here with ``base_dir``/``source``
     n_jobs     workers; None: ``cfg.parallel.n_jobs`` (None there: all cores); the dask
                backend uses every thread of the cluster instead
     backend    auto | loky | threads | dask; None: ``cfg.parallel.backend``
@@ -283,177 +154,252 @@ def compute_sweep(
     warning). Writes nothing but the job cache.
     """
     t_start = time.perf_counter()
-    timings: dict[str, float] = dict.fromkeys(
-        ("lookup", "warm", "execute", "kernel", "store", "signals", "writes"), 0.0)
-    plan = plan_sweep(cfg, base_dir, source)
+    timings: dict[str, float] = dict.fromkeys(TIMINGS, 0.0)
+    if not isinstance(plan, Plan):
+        plan = plan_sweep(plan, base_dir, source)
     timings["plan"] = time.perf_counter() - t_start
-    workers = resolve_workers(n_jobs if n_jobs is not None else cfg.parallel.n_jobs)
-    backend = resolve_backend(backend or cfg.parallel.backend, workers)
-    scheduler = scheduler or cfg.parallel.scheduler
-    if backend == "dask":
-        check_dask(scheduler)
-    n_out_plan = plan.n_steps // plan.dec + 1 if plan.dec > 0 else 0
-    if n_out_plan > 0 and plan.jobs:  # one chunk's recording must fit: refused before any write
-        size = chunk_sizes(plan.n_unique, plan.n_steps, workers, backend, n_out_plan,
-                           chunk_size or cfg.parallel.chunk_size)[0]
-        check_memory(size, n_out_plan, 0)
-    if cache_dir is not None:
-        check_cache_dir(Path(cache_dir))
+    setup = _setup(plan, n_jobs, backend, scheduler, chunk_size, cache_dir)
     if on_start is not None:  # first: a bad output folder is reported before anything is made
         on_start(plan)
-    cache: JobCache | None = None
+    run = _Run(plan, setup, on_signals, keep_signals, timings)
+    aborted = True
+    try:
+        run.open_cache(cache_dir)
+        pending = run.look_up(force)
+        run.execute(pending, progress)
+        aborted = False
+    except KeyboardInterrupt:
+        run.interrupted = True
+        raise
+    finally:
+        run.close()
+        result = run.result()
+        if on_finish is not None:
+            on_finish(result, aborted)
+        timings["total"] = time.perf_counter() - t_start
+    return result
 
-    n = len(plan.jobs)
-    n_out = plan.n_steps // plan.dec + 1 if plan.dec > 0 else 0
-    rule = (signals_rule(plan.n_steps, n_out, workers)
-            if n_out > 0 and cache_dir is not None else None)
-    cache_signals = rule is not None and rule.cache
-    metrics = np.full((n, N_METRICS), np.nan)
-    status = [PENDING] * n
-    errors = [""] * n
-    memory: dict[str, np.ndarray] = {}
-    by_key: dict[str, list[int]] = {}
-    for j in plan.jobs:
-        by_key.setdefault(j.key, []).append(j.index)
-    first = {key: idxs[0] for key, idxs in by_key.items()}
-    computed = cached = 0
-    sink_failed = False
-    run_warnings: list[str] = []
 
-    def finish(key: str, m: np.ndarray) -> None:
+@dataclass(frozen=True)
+class _Setup:
+    """How a sweep executes: workers, backend, dask scheduler, jobs per chunk (None: auto)."""
+
+    workers: int
+    backend: str
+    scheduler: str | None
+    chunk_size: int | None
+
+
+def _setup(plan: Plan, n_jobs: int | None, backend: str | None, scheduler: str | None,
+           chunk_size: int | None, cache_dir: Path | None) -> _Setup:
+    """Resolve the execution options over ``plan.cfg.parallel`` and refuse, before anything is
+    written, a dask backend without a scheduler, a chunk whose recording does not fit in
+    memory and a cache folder that cannot be made."""
+    par = plan.cfg.parallel
+    workers = resolve_workers(n_jobs if n_jobs is not None else par.n_jobs)
+    setup = _Setup(workers, resolve_backend(backend or par.backend, workers),
+                   scheduler or par.scheduler, chunk_size or par.chunk_size)
+    if setup.backend == "dask":
+        check_dask(setup.scheduler)
+    n_out = _n_out(plan)
+    if n_out > 0 and plan.jobs:  # one chunk's recording must fit
+        size = chunk_sizes(plan.n_unique, plan.n_steps, workers, setup.backend, n_out,
+                           setup.chunk_size)[0]
+        check_memory(size, n_out, 0)
+    if cache_dir is not None:
+        check_cache_dir(Path(cache_dir))
+    return setup
+
+
+def _n_out(plan: Plan) -> int:
+    """Samples recorded per job (0: none)."""
+    return plan.n_steps // plan.dec + 1 if plan.dec > 0 else 0
+
+
+class _Run:
+    """One sweep being executed: the job states, the job cache and the chunks in flight.
+
+    Jobs with the same cache key are computed once (``by_key``: key -> job indices, ``first``:
+    key -> the job that stands for it). Finished chunks are stored in the cache as they
+    complete (in a thread of their own when their signals are cached: one in flight) and their
+    signals handed to ``on_signals``.
+    """
+
+    def __init__(self, plan: Plan, setup: _Setup, on_signals: OnSignals | None,
+                 keep_signals: bool, timings: dict[str, float]) -> None:
+        self.plan, self.setup, self.timings = plan, setup, timings
+        self.on_signals, self.keep_signals = on_signals, keep_signals
+        n = len(plan.jobs)
+        self.n_out = _n_out(plan)
+        self.metrics = np.full((n, N_METRICS), np.nan)
+        self.status, self.errors = [PENDING] * n, [""] * n
+        self.memory: dict[str, np.ndarray] = {}
+        self.by_key: dict[str, list[int]] = {}
+        for j in plan.jobs:
+            self.by_key.setdefault(j.key, []).append(j.index)
+        self.first = {key: idxs[0] for key, idxs in self.by_key.items()}
+        self.computed = self.cached = 0
+        self.sink_failed = self.interrupted = False
+        self.warnings: list[str] = []
+        self.rule: SignalsRule | None = None
+        self.cache: JobCache | None = None
+        self.pool: ThreadPoolExecutor | None = None
+        self.storing: list[Future[float]] = []  # the chunk being stored (one at most)
+        self.chunk_keys: list[list[str]] = []
+        self.done_chunks: set[int] = set()
+        self.bar = _Progress(0, False, "")
+
+    @property
+    def cache_signals(self) -> bool:
+        return self.rule is not None and self.rule.cache
+
+    # ------------------------------------------------------------------ steps
+    def open_cache(self, cache_dir: Path | None) -> None:
+        """Open the job cache (None: no cache) and decide whether it stores signals."""
+        if cache_dir is None:
+            return
+        if self.n_out > 0:
+            self.rule = signals_rule(self.plan.n_steps, self.n_out, self.setup.workers)
+        self.cache = JobCache(cache_dir)
+        if self.cache_signals:
+            self.pool = ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
+
+    def look_up(self, force: bool) -> list[str]:
+        """Finish the jobs the cache holds intact -> the keys still to compute, in job order."""
+        t0 = time.perf_counter()
+        pending = _lookup(self.cache, self.by_key, force, self.plan.dec, self.n_out,
+                          self.finish, self.hand_on)
+        pending.sort(key=self.first.__getitem__)
+        announce_size(len(pending), self.plan.n_steps, self.setup.workers)
+        self.cached = len(self.by_key) - len(pending)
+        if self.cache is not None and self.cache.corrupt:
+            self.warnings.append(_corrupt_warning(self.cache))
+        self.timings["lookup"] = time.perf_counter() - t0 - self.timings["signals"]
+        return pending
+
+    def execute(self, pending: list[str], progress: bool) -> None:
+        """Compute the ``pending`` keys in chunks (one kernel call each) on the backend."""
+        plan, setup, timings = self.plan, self.setup, self.timings
+        sizes = chunk_sizes(len(pending), plan.n_steps, setup.workers, setup.backend,
+                            self.n_out, setup.chunk_size)
+        bounds = np.cumsum([0, *sizes])
+        self.chunk_keys = [pending[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        chunks = [plan.P([plan.jobs[self.first[k]] for k in keys]) for keys in self.chunk_keys]
+        reference = plan.reference if plan.reference is not None else plan.signal
+        label = f"{plan.cfg.name}: {len(pending)} to run, {self.cached} cached"
+        self.bar = _Progress(sum(len(self.by_key[k]) for k in pending), progress, label)
+        with self.bar:
+            if chunks and setup.backend != "dask":
+                timings["warm"] = warm_kernel(reference, plan.dt, 1)  # the prange kernel
+            t1 = time.perf_counter()
+            try:
+                execute(chunks, reference, plan.dt, plan.n_steps, plan.dec, setup.backend,
+                        setup.workers, self.on_chunk, setup.scheduler)
+                tw = time.perf_counter()
+                self.settle()
+                timings["writes"] += time.perf_counter() - tw
+            except (KeyboardInterrupt, EmaError):
+                raise
+            except Exception as exc:  # a worker died: unfinished chunks are marked failed
+                if self.sink_failed:  # ... unless writing the outputs failed: that stops it
+                    raise
+                self.fail_unfinished(f"{type(exc).__name__}: {exc}")
+            timings["execute"] = time.perf_counter() - t1
+
+    def close(self) -> None:
+        """Finish the chunk being stored (an aborted sweep too) and stop the store thread."""
+        if self.pool is not None:
+            with contextlib.suppress(Exception):
+                self.settle()
+            self.pool.shutdown()
+
+    def result(self) -> SweepResult:
+        """The sweep's result as it stands (every job not finished is pending or failed)."""
+        cache = self.cache
+        return SweepResult(self.plan, metrics_frame(self.plan, self.metrics, self.status,
+                                                    self.errors),
+                           None, cache, self.setup.backend, self.setup.workers,
+                           computed=self.computed, cached=self.cached,
+                           interrupted=self.interrupted, timings=self.timings,
+                           cache_corrupt=len(cache.corrupt) if cache is not None else 0,
+                           memory=self.memory, signals_rule=self.rule,
+                           run_warnings=self.warnings)
+
+    # ------------------------------------------------------------------ job bookkeeping
+    def finish(self, key: str, m: np.ndarray) -> None:
+        """Every job of ``key`` finished with metrics ``m``."""
         st = DIVERGED if m[MET["diverged"]] == 1.0 else OK
-        for idx in by_key[key]:
-            metrics[idx] = m
-            status[idx] = st
+        for idx in self.by_key[key]:
+            self.metrics[idx] = m
+            self.status[idx] = st
 
-    def hand_on(keys: Sequence[str], signals: np.ndarray | None) -> None:
+    def fail(self, keys: Sequence[str], text: str) -> None:
+        """Every job of ``keys`` failed with the error ``text``."""
+        for key in keys:
+            for idx in self.by_key[key]:
+                self.status[idx], self.errors[idx] = FAILED, text
+
+    def fail_unfinished(self, text: str) -> None:
+        """Every chunk not finished failed with the error ``text``."""
+        for i, keys in enumerate(self.chunk_keys):
+            if i not in self.done_chunks:
+                self.fail(keys, text)
+
+    def hand_on(self, keys: Sequence[str], signals: np.ndarray | None) -> None:
         """Give the signals of finished ``keys`` to ``on_signals`` (every job of each key)."""
-        nonlocal sink_failed
-        if on_signals is None or signals is None or plan.dec <= 0:
+        if self.on_signals is None or signals is None or self.plan.dec <= 0:
             return
         ts = time.perf_counter()
-        pairs = [(idx, r) for r, key in enumerate(keys) for idx in by_key[key]]
+        pairs = [(idx, r) for r, key in enumerate(keys) for idx in self.by_key[key]]
         try:
-            on_signals([p[0] for p in pairs], [p[1] for p in pairs], signals)
+            self.on_signals([p[0] for p in pairs], [p[1] for p in pairs], signals)
         except BaseException:
-            sink_failed = True
+            self.sink_failed = True
             raise
         finally:
-            timings["signals"] += time.perf_counter() - ts
+            self.timings["signals"] += time.perf_counter() - ts
 
-    def store(keys: list[str], res: ChunkOutput) -> float:
-        """Store a finished chunk in the cache (its signals if ``cache_signals``) -> seconds
-        taken."""
+    def store(self, keys: list[str], res: ChunkOutput) -> float:
+        """Store a finished chunk in the cache (its signals if they are cached) -> seconds."""
         ts = time.perf_counter()
-        assert cache is not None and res.metrics is not None
-        cache.store(keys, res.metrics, res.signals if cache_signals else None, plan.dec)
+        assert self.cache is not None and res.metrics is not None
+        self.cache.store(keys, res.metrics, res.signals if self.cache_signals else None,
+                         self.plan.dec)
         return time.perf_counter() - ts
 
-    def settle() -> None:
+    def settle(self) -> None:
         """Wait for the chunk being stored in the background (re-raises a cache error)."""
-        if storing:
-            timings["store"] += storing.pop().result()
+        if self.storing:
+            self.timings["store"] += self.storing.pop().result()
 
-    def on_chunk(i: int, res: ChunkOutput) -> None:
+    def on_chunk(self, i: int, res: ChunkOutput) -> None:
         """A chunk finished: record its jobs, store it in the cache and hand its signals on.
 
         With signals to cache, the store runs in a thread of its own while the signals are
         handed on and the next chunk computes; it is waited for when the next chunk finishes
         (one in flight) and at the end. Its jobs count as computed at once.
         """
-        nonlocal computed
         ts = time.perf_counter()
-        keys = chunk_keys[i]
-        done_chunks.add(i)
-        timings["kernel"] += res.kernel_s
+        keys = self.chunk_keys[i]
+        self.done_chunks.add(i)
+        self.timings["kernel"] += res.kernel_s
         if res.error is not None or res.metrics is None:
-            for key in keys:
-                for idx in by_key[key]:
-                    status[idx] = FAILED
-                    errors[idx] = res.error or "no result"
+            self.fail(keys, res.error or "no result")
         else:
-            if keep_signals and not cache_signals and res.signals is not None and plan.dec > 0:
-                memory.update((key, res.signals[r]) for r, key in enumerate(keys))
-            if pool is not None:
-                settle()
-                storing.append(pool.submit(store, keys, res))
-            elif cache is not None:
-                timings["store"] += store(keys, res)
-            hand_on(keys, res.signals)
+            if (self.keep_signals and not self.cache_signals and res.signals is not None
+                    and self.plan.dec > 0):
+                self.memory.update((key, res.signals[r]) for r, key in enumerate(keys))
+            if self.pool is not None:
+                self.settle()
+                self.storing.append(self.pool.submit(self.store, keys, res))
+            elif self.cache is not None:
+                self.timings["store"] += self.store(keys, res)
+            self.hand_on(keys, res.signals)
             for r, key in enumerate(keys):
-                finish(key, res.metrics[r])
-            computed += len(keys)
-        timings["writes"] += time.perf_counter() - ts
-        bar.advance(sum(len(by_key[k]) for k in keys))
-
-    chunk_keys: list[list[str]] = []
-    done_chunks: set[int] = set()
-    bar = _Progress(0, False, "")
-    pool: ThreadPoolExecutor | None = None
-    storing: list[Future[float]] = []  # the chunk being stored in the background (one at most)
-    interrupted = aborted = False
-    try:
-        cache = JobCache(cache_dir) if cache_dir is not None else None
-        if cache is not None and cache_signals:
-            pool = ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
-        t0 = time.perf_counter()
-        pending = _lookup(cache, by_key, force, plan.dec, n_out, finish, hand_on)
-        pending.sort(key=first.__getitem__)
-        announce_size(len(pending), plan.n_steps, workers)
-        cached = len(by_key) - len(pending)
-        if cache is not None and cache.corrupt:
-            run_warnings.append(_corrupt_warning(cache))
-        timings["lookup"] = time.perf_counter() - t0 - timings["signals"]
-
-        sizes = chunk_sizes(len(pending), plan.n_steps, workers, backend, n_out,
-                            chunk_size or cfg.parallel.chunk_size)
-        bounds = np.cumsum([0, *sizes])
-        chunk_keys = [pending[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-        chunks = [plan.P([plan.jobs[first[k]] for k in keys]) for keys in chunk_keys]
-        label = f"{cfg.name}: {len(pending)} to run, {cached} cached"
-        bar = _Progress(sum(len(by_key[k]) for k in pending), progress, label)
-        with bar:
-            if chunks and backend != "dask":
-                timings["warm"] = warm_kernel(plan.signal, plan.dt, 1)  # the prange kernel
-            t1 = time.perf_counter()
-            try:
-                execute(chunks, plan.signal, plan.dt, plan.n_steps, plan.dec, backend, workers,
-                        on_chunk, scheduler)
-                tw = time.perf_counter()
-                settle()
-                timings["writes"] += time.perf_counter() - tw
-            except (KeyboardInterrupt, EmaError):
-                raise
-            except Exception as exc:  # a worker died: unfinished chunks are marked failed
-                if sink_failed:  # ... unless writing the outputs failed: that stops the sweep
-                    raise
-                text = f"{type(exc).__name__}: {exc}"
-                for i, keys in enumerate(chunk_keys):
-                    if i not in done_chunks:
-                        for key in keys:
-                            for idx in by_key[key]:
-                                status[idx], errors[idx] = FAILED, text
-            timings["execute"] = time.perf_counter() - t1
-    except KeyboardInterrupt:
-        interrupted = aborted = True
-        raise
-    except BaseException:
-        aborted = True
-        raise
-    finally:
-        if pool is not None:  # an aborted sweep: the chunk being stored is finished first
-            with contextlib.suppress(Exception):
-                settle()
-            pool.shutdown()
-        result = SweepResult(plan, metrics_frame(plan, metrics, status, errors), None, cache,
-                             backend, workers, computed=computed, cached=cached,
-                             interrupted=interrupted, timings=timings,
-                             cache_corrupt=len(cache.corrupt) if cache is not None else 0,
-                             memory=memory, signals_rule=rule, run_warnings=run_warnings)
-        if on_finish is not None:
-            on_finish(result, aborted)
-        timings["total"] = time.perf_counter() - t_start
-    return result
+                self.finish(key, res.metrics[r])
+            self.computed += len(keys)
+        self.timings["writes"] += time.perf_counter() - ts
+        self.bar.advance(sum(len(self.by_key[k]) for k in keys))
 
 
 def check_cache_dir(path: Path) -> None:

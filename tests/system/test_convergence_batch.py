@@ -8,7 +8,7 @@ import pytest
 from ema_cli.model.params import INDEX, resolve, to_row
 from ema_cli.sim.signals import InputSignal
 from ema_cli.units import DEG
-from tests.conftest import LINEAR_OVERRIDES, run_rows
+from tests.helpers.batch import LINEAR_OVERRIDES, run_rows
 
 
 def _theta_at_common_times(p, signal, duration, dts, out_dt):

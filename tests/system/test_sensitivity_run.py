@@ -12,10 +12,10 @@ import pytest
 from typer.testing import CliRunner
 
 from ema_cli import api
+from ema_cli.api.sensitivity import run_sensitivity
 from ema_cli.cli.main import app
 from ema_cli.config.loader import load_config
 from ema_cli.config.sensitivity import SensitivityConfig
-from ema_cli.report.sensitivity_report import run_sensitivity
 from ema_cli.sensitivity.analyze import indices
 
 runner = CliRunner()

@@ -14,12 +14,13 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-import ema_cli.report.sweep_report as sweep_report
+import ema_cli.report.sweep_parquet as sweep_parquet
+from ema_cli.api.study import run_sweep
 from ema_cli.config.loader import load_config
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.files import AtomicFile, atomic_write
-from ema_cli.report.sweep_report import default_cache_dir, run_sweep
+from ema_cli.report.sweep_report import default_cache_dir
 from ema_cli.sim.tables import METRICS, N_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import DB_NAME, DEFAULT_CACHE_DIR
 from ema_cli.sweep.run import compute_sweep
@@ -88,7 +89,7 @@ def test_signals_parquet_round_trips_the_recorded_signals(tmp_path):
 
 def test_row_groups_hold_whole_jobs_and_a_filter_reads_one(tmp_path, monkeypatch):
     row = (3 + N_SIGNALS) * 8 * N_OUT  # bytes per job: job, swept value, t_s, signals
-    monkeypatch.setattr(sweep_report, "ROW_GROUP_BYTES", 2 * row)  # two jobs per group
+    monkeypatch.setattr(sweep_parquet, "ROW_GROUP_BYTES", 2 * row)  # two jobs per group
     res = sweep(tmp_path)
     meta = pq.ParquetFile(res.signals_file).metadata
     assert meta.num_row_groups == 2 and meta.num_rows == 4 * N_OUT
@@ -117,7 +118,7 @@ def test_per_job_csv_only_on_request(tmp_path):
 @pytest.mark.parametrize("where", ["write_table", "close"])
 @pytest.mark.parametrize("exc", [KeyboardInterrupt, OSError])
 def test_an_interrupted_signals_write_leaves_no_file(tmp_path, monkeypatch, where, exc):
-    monkeypatch.setattr(sweep_report, "ROW_GROUP_BYTES", 1)  # a row group per job
+    monkeypatch.setattr(sweep_parquet, "ROW_GROUP_BYTES", 1)  # a row group per job
     calls = []
     real = getattr(pq.ParquetWriter, where)
 
@@ -138,7 +139,7 @@ def test_an_interrupted_signals_write_leaves_no_file(tmp_path, monkeypatch, wher
     monkeypatch.setattr(pq.ParquetWriter, where, real)
     res = sweep(tmp_path)  # the same --out: resumed, the stored jobs from the cache
     # a row group written in the encoder thread fails at the next one: job 3 was stored too
-    stored = 2 + sweep_report.PARQUET_THREAD if where == "write_table" else 4
+    stored = 2 + sweep_parquet.PARQUET_THREAD if where == "write_table" else 4
     assert res.cached == stored and res.computed == 4 - res.cached
     assert len(pd.read_parquet(res.signals_file)) == 4 * N_OUT and leftovers(run) == []
 

@@ -14,12 +14,12 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-import ema_cli.report.reproduce_report as reproduce_report
+import ema_cli.api.study as api_study
+from ema_cli.api.study import run_sweep
 from ema_cli.cli.main import app
 from ema_cli.config.loader import load_config
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
-from ema_cli.report.sweep_report import run_sweep
 from ema_cli.sweep.plan import plan_sweep
 
 runner = CliRunner()
@@ -130,7 +130,7 @@ def experiment(tmp_path: Path) -> Path:
 
 def test_reproduce_resumed_after_the_first_study_keeps_it(tmp_path, monkeypatch):
     exp, out = experiment(tmp_path), tmp_path / "out"
-    real = reproduce_report.run_sweep
+    real = api_study.run_sweep
     calls = []
 
     def interrupted(cfg, folder, **kw):
@@ -139,13 +139,13 @@ def test_reproduce_resumed_after_the_first_study_keeps_it(tmp_path, monkeypatch)
             raise KeyboardInterrupt
         return real(cfg, folder, **kw)
 
-    monkeypatch.setattr(reproduce_report, "run_sweep", interrupted)
+    monkeypatch.setattr(api_study, "run_sweep", interrupted)
     r = runner.invoke(app, ["reproduce", str(exp), "--out", str(out), "--n-jobs", "1"])
     assert r.exit_code != 0
     first = out / "studies" / "figA"
     assert json.loads((first / ".ema-run.json").read_text())["finished"] is True
     before = mtimes(first)
-    monkeypatch.setattr(reproduce_report, "run_sweep", real)
+    monkeypatch.setattr(api_study, "run_sweep", real)
     r = runner.invoke(app, ["reproduce", str(exp), "--out", str(out), "--n-jobs", "1"])
     assert r.exit_code == 0, r.output
     assert mtimes(first) == before  # reused, not rewritten

@@ -14,10 +14,10 @@ from typer.testing import CliRunner
 
 import ema_cli.sweep.cache as job_cache
 import ema_cli.sweep.execute as execute
+from ema_cli.api.study import run_sweep
 from ema_cli.cli.main import app
 from ema_cli.config.loader import load_config
 from ema_cli.config.study import StudyConfig
-from ema_cli.report.sweep_report import run_sweep
 from ema_cli.sim.runner import simulate
 from ema_cli.sim.tables import METRICS, N_SIGNALS
 from ema_cli.sweep.cache import JobCache

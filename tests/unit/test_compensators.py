@@ -24,7 +24,7 @@ from ema_cli.model.params import resolve
 from ema_cli.sim.signals import InputSignal
 from ema_cli.sim.tables import MET
 from ema_cli.units import DEG
-from tests.conftest import LINEAR_OVERRIDES, run_rows
+from tests.helpers.batch import LINEAR_OVERRIDES, run_rows
 
 
 def test_deadzone_inverse_by_hand():

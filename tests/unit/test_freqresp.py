@@ -19,7 +19,7 @@ from ema_cli.analysis.linear import linear_model
 from ema_cli.errors import EmaError
 from ema_cli.model.params import resolve
 from ema_cli.units import DEG
-from tests.conftest import LINEAR_OVERRIDES
+from tests.helpers.batch import LINEAR_OVERRIDES
 
 
 def test_linear_limit_matches_the_linear_model():

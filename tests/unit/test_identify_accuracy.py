@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ema_cli.api.reproduce import identification_summary
 from ema_cli.identify.run import load_data, run_identification
 from ema_cli.identify.settings import IdentifySettings
-from ema_cli.report.identify_figures import identification_summary
 
 TARGET_PCT = 0.01  # the accuracy target for the improved GA [%]
 SEEDS = 10

@@ -20,7 +20,7 @@ from ema_cli.sim.runner import plan_steps, simulate_batch
 from ema_cli.sim.signals import InputSignal, sample
 from ema_cli.sim.tables import MET, SIG
 from ema_cli.units import DEG
-from tests.conftest import LINEAR_OVERRIDES, run_rows
+from tests.helpers.batch import LINEAR_OVERRIDES, run_rows
 
 TH_L = SIG["theta_load"]
 

@@ -13,8 +13,8 @@ from ema_cli.errors import EmaError
 from ema_cli.model.params import resolve
 from ema_cli.sim.signals import InputSignal
 from ema_cli.units import DEG
-from tests.conftest import LINEAR_OVERRIDES, run_rows
-from tests.system.test_linear_reference import linear_ss
+from tests.helpers.batch import LINEAR_OVERRIDES, run_rows
+from tests.helpers.linear import linear_ss
 
 VARIANTS = [{}, {"kL": 300.0, "Kpp": 80.0}, {"Kps": 0.3, "Kis": 4.0, "zeta_t": 0.05},
             {"k_h": 50.0, "bL": 0.1}, {"fb_motor": 1.0}, {"fb_motor": 0.4, "kL": 200.0}]

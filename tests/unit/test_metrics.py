@@ -11,7 +11,7 @@ from ema_cli.model.params import resolve
 from ema_cli.sim.signals import InputSignal
 from ema_cli.sim.tables import MET, SIG
 from ema_cli.units import DEG
-from tests.conftest import run_rows
+from tests.helpers.batch import run_rows
 
 
 def oracle(t, ref, y, e, ev, cur, u, wl, T, step, t0):
