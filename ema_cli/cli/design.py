@@ -84,12 +84,12 @@ def design_cmd(
     for c in cases:
         sides = "".join({"low": "-", "high": "+"}[c["sides"][n]] for n in names) if c[
             "sides"] else "estimate"
-        failed = [t for t, ok in c["tests"].items() if not ok]
-        crows.append([c["case"], sides, "PASS" if c["passed"] else "FAIL",
-                      ", ".join(failed) or "-"])
+        failed = [t if r == "FAIL" else f"{t} (inconclusive)"
+                  for t, r in c["test_results"].items() if r != "PASS"]
+        crows.append([c["case"], sides, c["verdict"], ", ".join(failed) or "-"])
     print_table(f"acceptance ({len(js['acceptance']['tests'])} tests per case)",
-                ["case", " ".join(names), "verdict", "failed tests"], crows,
-                justify=["left", "left", "left", "left"], wrap=["failed tests"],
+                ["case", " ".join(names), "verdict", "tests not passed"], crows,
+                justify=["left", "left", "left", "left"], wrap=["tests not passed"],
                 caption="corners: - low / + high end of each 95 % interval")
     for n in js["notes"]:
         err_console.print(textwrap.fill(f"note: {n}", width(), subsequent_indent="  "),
