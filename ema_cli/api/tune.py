@@ -233,8 +233,8 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     if config is None:
         raise EmaError("tune needs a tuning config (a YAML file such as configs/tune.yaml)")
     if method is not None and method not in ("ga", "de"):
-        raise EmaError(f"--method must be ga or de, got {method!r}")
-    for value, name, cap in ((runs, "--runs", MAX_RUNS), (budget, "--budget", MAX_BUDGET)):
+        raise EmaError(f"method must be ga or de, got {method!r}")
+    for value, name, cap in ((runs, "runs", MAX_RUNS), (budget, "budget", MAX_BUDGET)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)
                                   or not 1 <= value <= cap):
             raise EmaError(f"{name} must be an integer in [1, {cap}], got {value!r}")

@@ -9,7 +9,14 @@ from typing import Annotated
 
 import typer
 
-from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.cli.common import (
+    as_options,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
 from ema_cli.progress import report as report_stage
 
 NO_CROSSOVER = {"gain_margin": "no phase crossover", "phase_margin": "no gain crossover"}
@@ -114,13 +121,9 @@ def acceptance_cmd(
     def progress(run: object) -> None:
         err_console.print(f"  {run.name} ({run.kind}) {run.wall_s:.2f} s")  # type: ignore[attr-defined]
 
-    from ema_cli.errors import EmaError
-
-    try:
-        res = acceptance(spec, parse_assignments(set_, "--set"), only=only, progress=progress)
-    except EmaError as exc:  # the API names its argument, the command its option
-        text = str(exc)
-        raise EmaError("--" + text if text.startswith("only: ") else text) from None
+    pairs = parse_assignments(set_, "--set")
+    res = as_options(lambda: acceptance(spec, pairs, only=only, progress=progress),
+                     only="--only")
     report_stage("writing files and figures")
     folder = res.save(out)
     from ema_cli.report.acceptance_report import fmt_limit, fmt_value

@@ -37,6 +37,22 @@ def printable(text: str) -> str:
     return re.sub(r"[\x00-\x08\x0b-\x1f\x7f]", "?", " ".join(text.split("\n")))
 
 
+def as_options(call: Callable[[], Any], **options: str) -> Any:
+    """Run an API ``call``; its EmaError names arguments (``f_min_hz``), re-raised naming the
+    command's options instead (``--f-min``): API errors name arguments, CLI errors options."""
+    import re
+
+    try:
+        return call()
+    except EmaError as exc:
+        text = exc.message
+        for arg, opt in options.items():
+            text = re.sub(rf"(?<![\w.-]){re.escape(arg)}(?![\w])", opt, text)
+        if text == exc.message:
+            raise
+        raise EmaError(text) from None
+
+
 def handle_errors(fn: F) -> F:
     """Turn EmaError (and Ctrl-C) into one clear message and an exit code, never a traceback.
 

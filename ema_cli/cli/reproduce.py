@@ -40,7 +40,7 @@ def reproduce_cmd(
     from ema_cli.report.reproduce_report import run_experiment, write_reproduction
     from ema_cli.report.rundir import finish_output, prepare_output
 
-    check_jobs(n_jobs, "--n-jobs")
+    n_jobs = check_jobs(n_jobs, "--n-jobs")
     overrides = parse_assignments(set_, "--set")
     exp = load_experiment(experiment, overrides)
     folder, resumed = prepare_output("reproduce", exp.name,

@@ -24,13 +24,17 @@ if TYPE_CHECKING:
 MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)
 MAX_TABLE_METRICS = 4  # metric columns of the terminal summary table
 MAX_SHOW_JOBS = 50  # jobs listed by `ema show` unless --all
-MAX_WORKERS = 4096  # --n-jobs above this is refused
+def check_jobs(n_jobs: int | None, option: str, scheduler: str | None = None) -> int | None:
+    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS -> the count to use, capped at the
+    cores available (with a note) unless a cluster ``scheduler`` is given."""
+    from ema_cli.limits import MAX_WORKERS, cap_workers
 
-
-def check_jobs(n_jobs: int | None, option: str) -> None:
-    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS."""
     if n_jobs is not None and n_jobs != -1:
         check_number(n_jobs, option + " (-1: all cores)", low=1, high=MAX_WORKERS)
+    n_jobs, note = cap_workers(n_jobs, option, cluster=scheduler is not None)
+    if note:
+        err_console.print(f"note: {note}", highlight=False)
+    return n_jobs
 
 ConfigArg = Annotated[Path, typer.Argument(help="YAML study config, e.g. configs/deadzone2.yaml.")]
 SetOpt = Annotated[list[str] | None, typer.Option(
@@ -104,12 +108,16 @@ def sweep_cmd(
 ) -> None:
     """Run a sweep: every job of CONFIG, in parallel, cached and resumable; writes metrics.csv,
     time series, figures, summary.md and manifest.json."""
+    from ema_cli.limits import BACKENDS
     from ema_cli.report.sweep_report import finish_sweep, run_sweep
 
-    check_jobs(n_jobs, "--n-jobs")
-    if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
-        raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
+    n_jobs = check_jobs(n_jobs, "--n-jobs", scheduler)
+    if backend is not None and backend not in BACKENDS:
+        raise EmaError(f"--backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
     cfg, overrides = _load(config, set_)
+    if n_jobs is None:  # the config's parallel.n_jobs, capped the same way
+        n_jobs = check_jobs(cfg.parallel.n_jobs, "parallel.n_jobs",
+                            scheduler or cfg.parallel.scheduler)
     result = run_sweep(cfg, out, n_jobs, backend, force, progress, scheduler=scheduler,
                        cache_dir=cache_dir, base_dir=config.parent, source=str(config),
                        overrides=overrides, figures="none" if no_figures else "background")

@@ -84,6 +84,12 @@ def _at(key: str, message: str) -> ValueError:
     return ValueError(f"{KEY_MARK}{key}{KEY_MARK}{message}")
 
 
+def _sine_seconds(f_hz: float) -> float:
+    """Simulated seconds of one sinestream frequency at ``f_hz``, at most (analysis.freqresp:
+    max(3 periods, 0.3 s) of settling and 4 measured periods)."""
+    return max(3.0 / f_hz, 0.3 + 1.0 / f_hz) + 4.0 / f_hz
+
+
 def _article(word: str) -> str:
     return "an" if word[0] in "aeiou" else "a"
 
@@ -122,6 +128,11 @@ class _Test(Strict):
         actuator's ``dt`` cannot measure and is refused (:func:`check_measurable`)."""
         return []
 
+    def sim_seconds(self) -> float:
+        """The simulated time of the test (cases x seconds, summed over its kernel calls) [s],
+        at most: with ``dt`` it gives the test's integration steps before it runs."""
+        return 0.0
+
 
 class StepTest(_Test):
     """A step of the position reference; the kernel's step metrics."""
@@ -140,6 +151,9 @@ class StepTest(_Test):
         if v == 0:
             raise ValueError("a step needs a nonzero amplitude [deg]")
         return v
+
+    def sim_seconds(self) -> float:
+        return self.duration_s
 
     def spans(self) -> list[tuple[str, float, int]]:
         return [("duration_s", self.duration_s, MIN_STEPS)]
@@ -170,6 +184,9 @@ class FrequencyResponseTest(_Test):
             raise ValueError(f"phase_at_hz ({self.phase_at_hz}) must lie within f_min_hz.."
                              f"f_max_hz ({self.f_min_hz}..{self.f_max_hz})")
         return self
+
+    def sim_seconds(self) -> float:
+        return len(self.amplitudes_deg) * (self.n + 1) * _sine_seconds(self.f_min_hz)
 
     def spans(self) -> list[tuple[str, float, int]]:
         return [("f_max_hz", 1.0 / self.f_max_hz, SINE_PERIOD_STEPS)]
@@ -223,6 +240,9 @@ class ThresholdTest(_Test):
                                     "would be at or below the ceiling; raise search_deg")
         return self
 
+    def sim_seconds(self) -> float:
+        return 8 * 13 * self.within_s  # 8 steps a batch, the first batch and 12 rounds at most
+
     def spans(self) -> list[tuple[str, float, int]]:
         return [("within_s", self.within_s, MIN_STEPS)]
 
@@ -244,6 +264,9 @@ class HysteresisTest(_Test):
                              f"than {MAX_DURATION_S:g} s")
         return self
 
+    def sim_seconds(self) -> float:
+        return self.period_s * self.cycles
+
     def spans(self) -> list[tuple[str, float, int]]:
         return [("period_s", self.period_s / 4, MIN_STEPS)]  # a quarter period: one ramp
 
@@ -258,6 +281,9 @@ class LoadDeflectionTest(_Test):
     period_s: PositiveFloat = Field(6.0, le=MAX_DURATION_S)
     fit_fraction: PositiveFloat = Field(
         0.25, lt=1.0, description="the lines are fitted where |T| >= this share of the peak")
+
+    def sim_seconds(self) -> float:
+        return self.period_s
 
     def spans(self) -> list[tuple[str, float, int]]:
         return [("period_s", self.period_s / 4, MIN_STEPS)]  # a quarter period: one ramp
@@ -281,6 +307,9 @@ class DynamicStiffnessTest(_Test):
                              f"({self.f_max_hz})")
         return self
 
+    def sim_seconds(self) -> float:
+        return (self.n + 16) * _sine_seconds(self.f_min_hz)  # the grid and 2 x 8 refinements
+
     def spans(self) -> list[tuple[str, float, int]]:
         return [("f_max_hz", 1.0 / self.f_max_hz, SINE_PERIOD_STEPS)]
 
@@ -293,6 +322,9 @@ class NoLoadRateTest(_Test):
     test: Literal["no_load_rate"]
     amplitude_deg: PositiveFloat = 40.0
     duration_s: PositiveFloat = Field(1.0, le=MAX_DURATION_S)
+
+    def sim_seconds(self) -> float:
+        return self.duration_s
 
     def spans(self) -> list[tuple[str, float, int]]:
         return [("duration_s", self.duration_s, MIN_STEPS)]
@@ -382,6 +414,11 @@ TEST_KINDS = tuple(METRICS)
 def check_measurable(name: str, test: _Test, dt: float) -> None:
     """Refuse a test that cannot measure with the time step ``dt`` [s] of its actuator: a
     duration or period spanning fewer time steps than it needs (EmaError naming the key)."""
+    from ema_cli.limits import check_steps
+
+    check_steps(test.sim_seconds() / dt, f"tests.{name} ({test.test})",
+                f"the actuator's dt_s = {dt:g} s is too fine for it: raise simulation.dt_s "
+                "(of the actuator, or in the test's set:), or shorten the test")
     for key, span, steps in test.spans():
         if span < steps * dt * (1 - 1e-9):
             value = getattr(test, key)
