@@ -65,3 +65,63 @@ def source_name(config: ConfigSource) -> str:
     if isinstance(config, Mapping):
         return "dict"
     return type(config).__name__
+
+
+def number_arg(value: Any, name: str, *, low: float | None = None, high: float | None = None,
+               low_open: bool = False, integer: bool = False, optional: bool = True) -> Any:
+    """``value`` as a finite number (an int when ``integer``) within ``low``..``high``, or None
+    when None and ``optional``; else EmaError naming the argument ``name``."""
+    import math
+
+    if value is None and optional:
+        return None
+    kind = "an integer" if integer else "a finite number"
+    ok_type = isinstance(value, int) if integer else isinstance(value, int | float)
+    if isinstance(value, bool) or not ok_type or not math.isfinite(value):
+        raise EmaError(f"{name} must be {kind}, got {value!r}")
+    if low is not None and (value <= low if low_open else value < low):
+        raise EmaError(f"{name} must be {'>' if low_open else '>='} {low:g}, got {value!r}")
+    if high is not None and value > high:
+        raise EmaError(f"{name} must be <= {high:g}, got {value!r}")
+    return value
+
+
+def choice_arg(value: Any, name: str, choices: Sequence[str]) -> Any:
+    """``value`` one of ``choices`` (or None); else EmaError naming ``name``."""
+    if value is not None and (not isinstance(value, str) or value not in choices):
+        raise EmaError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
+    return value
+
+
+def flag_arg(value: Any, name: str) -> bool:
+    """``value`` a bool; else EmaError naming ``name``."""
+    if not isinstance(value, bool):
+        raise EmaError(f"{name} must be True or False, got {value!r}")
+    return value
+
+
+def callable_arg(value: Any, name: str) -> Any:
+    """``value`` a callable or None; else EmaError naming ``name``."""
+    if value is not None and not callable(value):
+        raise EmaError(f"{name} must be a function or None, got {value!r}")
+    return value
+
+
+def names_arg(value: Any, name: str) -> list[str] | None:
+    """``value`` a list of strings (a single string is one name) or None; else EmaError."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        return [value]
+    if not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value):
+        raise EmaError(f"{name} must be a list of names (str), got {value!r}")
+    return list(value)
+
+
+def path_arg(value: Any, name: str) -> Path | None:
+    """``value`` a path (str or Path) or None; else EmaError naming ``name``."""
+    if value is None:
+        return None
+    if not isinstance(value, str | Path) or not str(value):
+        raise EmaError(f"{name} must be a path (str or Path), got {value!r}")
+    return Path(value)

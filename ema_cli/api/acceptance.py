@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Sequence  # noqa: F401 - Sequence in hints
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -142,11 +142,10 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
 
     if spec is None:
         raise EmaError("acceptance needs a spec (a YAML file such as configs/acceptance.yaml)")
-    if only is not None and (isinstance(only, str | bytes) or not isinstance(only, Sequence)
-                             or not all(isinstance(n, str) for n in only)):
-        raise EmaError(f"only must be a list of test names (str), got {only!r}")
-    if progress is not None and not callable(progress):
-        raise EmaError(f"progress must be a callable or None, got {progress!r}")
+    from ema_cli.api._inputs import callable_arg, names_arg
+
+    only = names_arg(only, "only")
+    callable_arg(progress, "progress")
     pairs = override_pairs(overrides)
     sp = load_config(spec, pairs, AcceptanceSpec)
     names = list(sp.tests)

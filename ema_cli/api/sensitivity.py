@@ -110,10 +110,15 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
              nothing is written to disk
     n_jobs, backend, force, progress   as ``api.sweep``
     """
+    from ema_cli.api._inputs import choice_arg, number_arg
+    from ema_cli.api.study import _parallel_args
     from ema_cli.config.loader import load_config
     from ema_cli.config.sensitivity import SensitivityConfig
     from ema_cli.report.sensitivity_report import run_sensitivity
 
+    _parallel_args(n_jobs, backend, force, progress, cache_dir)
+    choice_arg(method, "method", ("sobol", "morris"))
+    number_arg(n, "n", low=1, integer=True)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, SensitivityConfig)
     res = run_sensitivity(cfg, None, method, n, n_jobs=n_jobs, backend=backend, force=force,

@@ -120,6 +120,20 @@ class Sweep:
                           self.overrides)
 
 
+def _parallel_args(n_jobs: Any, backend: Any, force: Any, progress: Any, cache_dir: Any) -> None:
+    """The parallel arguments of ``sweep`` and ``sensitivity``, checked (EmaError naming the
+    argument)."""
+    from ema_cli.api._inputs import choice_arg, flag_arg, number_arg, path_arg
+    from ema_cli.limits import BACKENDS, MAX_WORKERS
+
+    if n_jobs != -1:
+        number_arg(n_jobs, "n_jobs", low=1, high=MAX_WORKERS, integer=True)
+    choice_arg(backend, "backend", BACKENDS)
+    flag_arg(force, "force")
+    flag_arg(progress, "progress")
+    path_arg(cache_dir, "cache_dir")
+
+
 def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | None = None,
           backend: str | None = None, force: bool = False, progress: bool = False,
           cache_dir: str | Path | None = None) -> Sweep:
@@ -134,6 +148,7 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
     from ema_cli.config.study import StudyConfig
     from ema_cli.report.sweep_report import run_sweep
 
+    _parallel_args(n_jobs, backend, force, progress, cache_dir)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
     res = run_sweep(cfg, None, n_jobs, backend, force, progress,

@@ -238,6 +238,10 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)
                                   or not 1 <= value <= cap):
             raise EmaError(f"{name} must be an integer in [1, {cap}], got {value!r}")
+    from ema_cli.api._inputs import callable_arg
+
+    callable_arg(progress, "progress")
+    callable_arg(log, "log")
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, TuneConfig)
     scenarios, actuator_doc = build_scenarios(cfg, base_dir(config))

@@ -399,7 +399,7 @@ class AcceptanceSpec(Strict):
                 if "test" not in entry:
                     raise _at(f"{name}.test", f"missing: the test kind, one of "
                                               f"{', '.join(METRICS)}")
-                if entry["test"] not in METRICS:
+                if not isinstance(entry["test"], str) or entry["test"] not in METRICS:
                     raise _at(f"{name}.test", f"unknown test {entry['test']!r}; expected one "
                                               f"of {', '.join(METRICS)}")
         return v
