@@ -235,5 +235,8 @@ def simulate(
     timings["kernel_load"] = res.load_s
     timings["simulation"] = res.kernel_s
     timings["total"] = time.perf_counter() - t0
+    from ema_cli.config.loader import inert_input_warnings
+
     return Simulation(cfg, run.params, run.signal, res, pairs, timings,
-                      resolution_warnings(run.params, run.dt))
+                      resolution_warnings(run.params, run.dt)
+                      + inert_input_warnings(run.signal, run.duration))

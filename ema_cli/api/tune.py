@@ -272,13 +272,15 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
 
 
 def infeasible_message(res: TuneResult) -> str:
-    """One line: no candidate met every constraint, and which the best one violates most."""
+    """One line: no candidate met every constraint, and which the best one violates most (the
+    largest violation relative to its limit, as the tuning scores it; NaN counts as the
+    largest)."""
     ev = res.outcome.after
     worst = ""
     df = res.constraints_frame()
     bad = df[~df["met"]]
     if len(bad):
-        r = bad.iloc[0]
+        r = bad.loc[relative_violation(bad).idxmax()]
         bound = f"<= {r['max']:g}" if r["max"] is not None and not math.isnan(
             r["max"]) else f">= {r['min']:g}"
         worst = (f"; the best violates scenarios.{r['scenario']} {r['constraint']} "
@@ -286,5 +288,23 @@ def infeasible_message(res: TuneResult) -> str:
     elif ev.diverged.any():
         worst = "; the best diverges"
     return (f"no candidate met every constraint in {int(res.outcome.timings['evaluations'])} "
-            f"evaluations{worst}: relax the constraints, widen the bounds or raise --budget "
+            f"evaluations{worst}: relax the constraints, widen the bounds or raise budget "
             "(infeasible constraints)")
+
+
+def relative_violation(df: pd.DataFrame) -> pd.Series:
+    """Per row of :meth:`TuneResult.constraints_frame`: how far the tuned value lies outside
+    its limit, relative to the limit (``(v - max)/|max|``, ``(min - v)/|min|``; inf for NaN)."""
+    import numpy as np
+
+    def one(r: Any) -> float:
+        v = r["after"]
+        if v != v:  # NaN: not measured, the worst
+            return math.inf
+        out = 0.0
+        for bound, sign in ((r["max"], 1.0), (r["min"], -1.0)):
+            if bound is not None and bound == bound:
+                out += max(sign * (v - bound), 0.0) / (abs(bound) or 1.0)
+        return out
+
+    return df.apply(one, axis=1).astype(np.float64)

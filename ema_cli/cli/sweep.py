@@ -201,6 +201,7 @@ def validate_cmd(
         from ema_cli.config.loader import load_config
 
         spec = load_config(config, overrides, AcceptanceSpec)
+        _check_actuator(spec.actuator, config)
         n_limits = sum(len(t.limits) for t in spec.tests.values())
         console.print(f"{config}: valid acceptance spec; {len(spec.tests)} tests, {n_limits} "
                       "limits")
@@ -219,6 +220,7 @@ def validate_cmd(
         from ema_cli.config.tune import TuneConfig
 
         t = load_config(config, overrides, TuneConfig)
+        _check_actuator(t.actuator, config)
         n_cons = len(t.constraints)
         console.print(f"{config}: valid tuning config; {len(t.scenarios)} scenarios, "
                       f"{len(t.variables)} variables ({', '.join(t.variables)}), {n_cons} "
@@ -247,6 +249,12 @@ def validate_cmd(
     from ema_cli.sweep.expand import check_size
 
     cfg, _ = _load(config, set_)
+    from ema_cli.config.loader import inert_input_warnings, input_signal
+
+    # the files it refers to (input and load profiles) are read and checked too
+    signal = input_signal(cfg.input, config.parent, cfg.load)
+    for w in inert_input_warnings(signal, cfg.simulation.duration_s):
+        err_console.print(f"warning: {w}", highlight=False)
     if not cfg.sweep.axes:  # a run config (`ema simulate`), or a study still without axes
         console.print(f"{config}: valid run config (no sweep axes: `ema simulate` runs it; "
                       "`ema sweep` needs sweep.axes)")
@@ -255,6 +263,22 @@ def validate_cmd(
     axes = "; ".join(f"{a.label} ({a.n_points()} values)" for a in cfg.sweep.axes)
     console.print(f"{config}: valid; {cfg.sweep.mode} over {axes} -> {n} jobs"
                   + (" (baseline included)" if cfg.sweep.baseline else ""))
+
+
+def _check_actuator(actuator: Any, config: Path) -> None:
+    """The run config an acceptance spec or a tuning config names (``actuator.config``): it
+    exists, passes the run-config schema and its profiles can be read."""
+    from ema_cli.config.loader import input_signal, load_config
+    from ema_cli.config.study import StudyConfig
+
+    src, here = actuator.source(config.parent, "config")
+    if src is None:
+        return
+    try:
+        run = load_config(src, [], StudyConfig)
+        input_signal(run.input, here, run.load)
+    except EmaError as exc:
+        raise EmaError(f"actuator.config: {exc}") from None
 
 
 @handle_errors
