@@ -182,6 +182,9 @@ def identify_cmd(
     check_number(c, "--c", low=0.0)
     check_number(pc, "--pc", low=0.0, high=1.0)
     check_number(pm, "--pm", low=0.0, high=1.0)
+    from ema_cli.cli.sweep import check_jobs
+
+    n_jobs = check_jobs(n_jobs, "--n-jobs")  # capped at the cores available, with a note
     options: dict[str, Any] = {
         "k_range": k_range, "alpha_range": alpha_range, "c_range": c_range, "method": method,
         "runs": runs, "n_jobs": n_jobs, "data": str(data) if data is not None else None,
