@@ -57,3 +57,10 @@ def test_docs_list_every_kind_and_metric(name):
     assert row is not None, f"docs/model.md: no row for the acceptance kind {name}"
     for metric in KINDS[name].metrics:
         assert f"`{metric}`" in row, (name, metric)
+
+
+def test_the_sine_period_floor_is_the_sinestreams():
+    # config/ cannot import analysis/ (a lower layer): the number is repeated, checked here
+    from ema_cli.analysis.freqresp import HARMONICS
+
+    assert cfg.SINE_PERIOD_STEPS == 8 * (HARMONICS + 1)
