@@ -528,7 +528,8 @@ class Verdict:
     ``result`` is PASS or FAIL for a measured value; for a bound (``measured`` false, the
     value known only to lie in ``[lower, upper]``) PASS or FAIL only when the whole interval
     lies inside or outside the limit, else INCONCLUSIVE with ``reason`` naming the setting to
-    change. A value that is not a number (a diverged run) is INCONCLUSIVE."""
+    change. A value that is not a number (a diverged run) is INCONCLUSIVE. ``lower`` and
+    ``upper`` (in ``unit``) equal ``value`` for a measured value."""
 
     test: str
     kind: str
@@ -585,10 +586,13 @@ def verdicts(run: TestRun, limits: Mapping[str, Any]) -> list[Verdict]:
         lo, hi = lim.si()
         result, reason = judge(m, lo, hi)
         note = m.note
-        if not m.measured and result != INCONCLUSIVE:
-            note = "; ".join(x for x in (note, f"decided on a bound: {m.reason}") if x)
+        if not m.measured and result != INCONCLUSIVE:  # the bound, without the advice
+            bound = m.reason.rsplit(": ", 1)[0]
+            note = "; ".join(x for x in (note, f"decided on a bound: {bound}")
+                             if x and x not in bound)
+        lower, upper = (m.value, m.value) if m.measured else (m.lower, m.upper)
         out.append(Verdict(run.name, run.kind, m.metric, m.condition,
                            from_si(m.value, lim.unit), lim.min, lim.max, lim.unit, result,
-                           m.measured, from_si(m.lower, lim.unit), from_si(m.upper, lim.unit),
+                           m.measured, from_si(lower, lim.unit), from_si(upper, lim.unit),
                            m.value, m.si_unit, note, reason))
     return out

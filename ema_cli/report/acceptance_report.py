@@ -240,7 +240,7 @@ def acceptance_markdown(res: Any) -> str:
              "| test | metric | condition | value | limit | unit | result | note |",
              "|---|---|---|---|---|---|---|---|"]
     for v in res.verdicts:
-        note = "; ".join(x for x in (v.reason, v.note) if x)
+        note = "; ".join(x for x in (v.reason, v.note) if x).replace("|", "\\|")
         lines.append(f"| {v.test} | {v.metric} | {v.condition} | {fmt_measured(v)} | "
                      f"{fmt_limit(v)} | {v.unit} | {RESULT_MD[v.result]} | {note} |")
     lines += ["", "A value measured inside the test's range is PASS or FAIL against its limit. "

@@ -69,6 +69,9 @@ def test_an_inconclusive_battery_exits_3_with_its_own_row_style(tmp_path):
         "widen f_max_hz").all()
     md = (out / "acceptance.md").read_text()
     assert "**INCONCLUSIVE**: 4 of 8" in md and md.count("| _INCONCLUSIVE_ |") == 4
+    rows = [ln for ln in md.splitlines() if ln.startswith("| margins |")]
+    # |L| in a reason is escaped: every row keeps its 8 cells
+    assert len(rows) == 4 and all(ln.replace("\\|", "").count("|") == 9 for ln in rows)
     man = json.loads((out / "manifest.json").read_text())
     assert man["verdict"] == "INCONCLUSIVE" and man["exit_code"] == 3
     # a FAIL outranks an INCONCLUSIVE: exit 1
