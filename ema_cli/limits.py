@@ -12,10 +12,12 @@ import os
 
 from ema_cli.errors import EmaError
 
-MAX_CASE_STEPS = 5_000_000_000  # cases x integration steps one command may start [-]
-"""About 5e9 case-steps: minutes to an hour of kernel time on two cores (the reference kernel
-runs 2-5e6 case-steps/s per core), and far above every bundled config (the bundled acceptance
-battery: ~2e8 by the same estimate; ``ema freqresp`` defaults: ~3e7)."""
+MAX_CASE_STEPS = 100_000_000_000  # cases x integration steps one command may start [-]
+"""1e11 case-steps: about half an hour of kernel time on two cores at the measured ~5.5e7
+case-steps/s (README: 22 ns per step and job over the workers; docs/sensitivity.md: the bundled
+Sobol study, 9.8e9 case-steps, in ~3 min). Every bundled config is far below it (the acceptance
+battery ~2e8 by the same estimate, ``ema freqresp`` defaults ~3e7); a frequency response down to
+1e-6 Hz (4.6e12, a day) is not."""
 MAX_RUN_STEPS = 100_000_000  # integration steps of one simulated run (a pass over a log) [-]
 MAX_WORKERS = 4096  # workers (--n-jobs, parallel.n_jobs) accepted at most; capped at the cores
 BACKENDS = ("auto", "loky", "threads", "dask")  # the parallel backends (sweep/execute.py too)

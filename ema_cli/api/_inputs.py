@@ -125,3 +125,29 @@ def path_arg(value: Any, name: str) -> Path | None:
     if not isinstance(value, str | Path) or not str(value):
         raise EmaError(f"{name} must be a path (str or Path), got {value!r}")
     return Path(value)
+
+
+def check_sweep_steps(cfg: Any, source: str) -> None:
+    """Refuse a sweep whose jobs x steps exceed :data:`ema_cli.limits.MAX_CASE_STEPS`."""
+    from ema_cli.limits import check_steps
+    from ema_cli.sweep.expand import check_size
+
+    if not cfg.sweep.axes:
+        return
+    n = check_size(cfg.sweep, source)  # the baseline included
+    steps = cfg.simulation.duration_s / cfg.simulation.dt_s
+    check_steps(n * steps, f"{source}: {n:,} jobs x {steps:.3g} steps",
+                "shrink sweep.axes, shorten simulation.duration_s or raise simulation.dt_s")
+
+
+def check_sensitivity_steps(cfg: Any, method: str | None, n: int | None, source: str) -> None:
+    """Refuse a sensitivity study whose runs x steps exceed the cap."""
+    from ema_cli.limits import check_steps
+    from ema_cli.sensitivity.run import resolve_method
+
+    method, n = resolve_method(cfg, method, n)
+    runs = cfg.runs(method, n)
+    steps = cfg.simulation.duration_s / cfg.simulation.dt_s
+    check_steps(runs * steps, f"{source}: {runs:,} runs ({method}, n = {n}) x {steps:.3g} "
+                              "steps", "lower n, shorten simulation.duration_s or raise "
+                                       "simulation.dt_s")

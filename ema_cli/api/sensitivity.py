@@ -121,6 +121,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     number_arg(n, "n", low=1, integer=True)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, SensitivityConfig)
+    from ema_cli.api._inputs import check_sensitivity_steps
+
+    check_sensitivity_steps(cfg, method, n, source_name(config))
     res = run_sensitivity(cfg, None, method, n, n_jobs=n_jobs, backend=backend, force=force,
                           progress=progress,
                           cache_dir=Path(cache_dir) if cache_dir is not None else None,

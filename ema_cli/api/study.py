@@ -149,8 +149,11 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
     from ema_cli.report.sweep_report import run_sweep
 
     _parallel_args(n_jobs, backend, force, progress, cache_dir)
+    from ema_cli.api._inputs import check_sweep_steps
+
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    check_sweep_steps(cfg, source_name(config))
     res = run_sweep(cfg, None, n_jobs, backend, force, progress,
                     cache_dir=Path(cache_dir) if cache_dir is not None else None,
                     base_dir=base_dir(config), source=source_name(config), overrides=pairs,

@@ -245,6 +245,16 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, TuneConfig)
     scenarios, actuator_doc = build_scenarios(cfg, base_dir(config))
+    from ema_cli.limits import check_steps
+    from ema_cli.tune.run import evaluations_for
+
+    o = cfg.optimiser
+    n_evals = (runs or o.runs) * evaluations_for(method or o.method, budget or o.budget, o.pop,
+                                                 len(cfg.variables), o.polish, o.local)
+    steps = cfg.simulation.duration_s / cfg.simulation.dt_s
+    check_steps(n_evals * len(scenarios) * steps,
+                f"tune: {n_evals:,} evaluations x {len(scenarios)} scenarios x {steps:.3g} steps",
+                "lower budget or runs, shorten simulation.duration_s or raise simulation.dt_s")
     if log is not None:
         o = cfg.optimiser
         n_runs = runs or o.runs

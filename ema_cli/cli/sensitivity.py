@@ -65,6 +65,9 @@ def sensitivity_cmd(
         raise EmaError(f"--backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
     overrides = parse_assignments(set_, "--set")
     cfg = load_config(config, overrides, SensitivityConfig)
+    from ema_cli.api._inputs import check_sensitivity_steps
+
+    check_sensitivity_steps(cfg, method, n, str(config))
     res = run_sensitivity(cfg, out, method, n, n_jobs=n_jobs, backend=backend,
                           scheduler=scheduler, progress=progress, base_dir=config.parent,
                           source=str(config), overrides=overrides,

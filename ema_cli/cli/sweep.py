@@ -115,6 +115,9 @@ def sweep_cmd(
     if backend is not None and backend not in BACKENDS:
         raise EmaError(f"--backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
     cfg, overrides = _load(config, set_)
+    from ema_cli.api._inputs import check_sweep_steps
+
+    check_sweep_steps(cfg, str(config))
     if n_jobs is None:  # the config's parallel.n_jobs, capped the same way
         n_jobs = check_jobs(cfg.parallel.n_jobs, "parallel.n_jobs",
                             scheduler or cfg.parallel.scheduler)

@@ -31,7 +31,7 @@ def test_the_sinestream_estimate_is_hand_arithmetic():
 def test_check_steps_refuses_above_the_cap_naming_what_and_how():
     check_steps(MAX_CASE_STEPS, "x", "y")
     for bad in (MAX_CASE_STEPS * 1.01, float("inf"), float("nan")):
-        with pytest.raises(EmaError, match=r"^thing: about .* more than the cap of 5e\+09; do y$"):
+        with pytest.raises(EmaError, match=r"^thing: about .* more than the cap of 1e\+11; do y$"):
             check_steps(bad, "thing", "do y")
 
 
@@ -73,3 +73,26 @@ def test_workers_are_capped_at_the_cores_with_a_note(tmp_path):
     text = " ".join(r.output.split())
     assert f"note: --n-jobs {have + 4} is more than the {have} cores available" in text
     assert f"x{have};" in text or f"x{min(have, 4)}" in text or "serial" in text
+
+
+def test_sweeps_sensitivity_and_tuning_are_bounded_too(tmp_path):
+    from ema_cli.api import sensitivity, sweep, tune
+
+    # 201 jobs (200 values and the baseline) x 1e9 steps = 2e11; 98,304 Sobol runs x 1e7
+    # steps = 9.8e11; the tuning below: 999,990 evaluations x 2e6 steps (dt 1e-5)
+    many = [0.001 * (k + 1) for k in range(200)]
+    big = {"simulation.duration_s": 100, "simulation.dt_s": 1e-7, "sweep.axes.0.values": many}
+    with pytest.raises(EmaError, match=r"20[01] jobs x 1e\+09 steps.*shrink sweep\.axes"):
+        sweep("configs/deadzone2.yaml", big)
+    with pytest.raises(EmaError, match=r"98,304 runs \(sobol, n = 4096\) x 1e\+07 steps"):
+        sensitivity("configs/sensitivity.yaml", {"simulation.duration_s": 100})
+    doc = {"name": "t", "scenarios": {"s": {"input": {"kind": "step", "amplitude_deg": 0.1}}},
+           "variables": {"Kpp": {"bounds": [10, 100]}}, "simulation": {"duration_s": 20}}
+    with pytest.raises(EmaError, match=r"^tune: .* evaluations x 1 scenarios x 2e\+06 steps"):
+        tune(doc, budget=1_000_000)
+    values = "[" + ", ".join(f"{v:g}" for v in many) + "]"
+    r = runner.invoke(app, ["sweep", "configs/deadzone2.yaml", "--set",
+                            "simulation.duration_s=100", "--set", "simulation.dt_s=1e-7",
+                            "--set", f"sweep.axes.0.values={values}",
+                            "--out", str(tmp_path / "s")])
+    assert r.exit_code == 2 and "more than the cap of 1e+11" in " ".join(r.output.split())
