@@ -350,11 +350,11 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
         raise EmaError(f"log '{log}' is not a file (a closed-loop log: CSV, Parquet or .mat)")
     tune_path = Path(tune_config) if tune_config is not None else DEFAULT_TUNE_CONFIG
     spec_path = Path(spec) if spec is not None else DEFAULT_SPEC
-    for p, what, opt in ((tune_path, "a tuning config", "--tune-config"),
-                         (spec_path, "an acceptance spec", "--spec")):
+    for p, what, arg in ((tune_path, "a tuning config", "tune_config"),
+                         (spec_path, "an acceptance spec", "spec")):
         if not p.is_file():
-            raise EmaError(f"{opt} '{p}' is not a file ({what}, e.g. configs/"
-                           f"{'tune' if opt == '--tune-config' else 'acceptance'}.yaml)")
+            raise EmaError(f"{arg} '{p}' is not a file ({what}, e.g. configs/"
+                           f"{'tune' if arg == 'tune_config' else 'acceptance'}.yaml)")
     pairs = override_pairs(overrides)
     by = split_overrides(pairs)
     cfg = load_config(config, [], DesignConfig)
@@ -375,7 +375,7 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
     load_config(spec_doc, [], AcceptanceSpec)
     if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int)
                                or budget < 1):
-        raise EmaError(f"--budget must be a positive integer, got {budget!r}")
+        raise EmaError(f"budget must be a positive integer, got {budget!r}")
     timings: dict[str, float] = {}
 
     say(f"1/3 identification of {log}")

@@ -10,7 +10,14 @@ from typing import Annotated
 
 import typer
 
-from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.cli.common import (
+    as_options,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
 from ema_cli.progress import report as report_stage
 
 
@@ -51,9 +58,13 @@ def design_cmd(
         raise EmaError(f"config '{config}' is not a file (a design config, e.g. "
                        "configs/design.yaml)")
     check_output(out, "design")
-    res = design(log, config, parse_assignments(set_, "--set"), tune_config=tune_config,
-                 spec=spec, budget=budget, stage=report_stage,
-                 tune_log=lambda text: err_console.print(text, highlight=False))
+    pairs = parse_assignments(set_, "--set")
+    res = as_options(lambda: design(log, config, pairs, tune_config=tune_config, spec=spec,
+                                    budget=budget, stage=report_stage,
+                                    tune_log=lambda text: err_console.print(text,
+                                                                            highlight=False)),
+                     anywhere=False, tune_config="--tune-config", spec="--spec",
+                     budget="--budget")
     report_stage("writing files and figures")
     folder = res.save(out)
     js = res.to_json()

@@ -214,9 +214,10 @@ def validate_cmd(
         from ema_cli.config.loader import load_config
 
         d = load_config(config, overrides, DesignConfig)
-        console.print(f"{config}: valid design config ({d.name}); the identify and tune "
-                      "sections are checked against their own schemas when `ema design` "
-                      "runs with the log")
+        _check_design_sections(d)
+        console.print(f"{config}: valid design config ({d.name}); its identify section "
+                      "checked against `ema identify --closed-loop`, its tune overrides "
+                      "against configs/tune.yaml (`ema design --tune-config` may name another)")
         return
     if kind == "tune":
         from ema_cli.config.loader import load_config
@@ -266,6 +267,24 @@ def validate_cmd(
     axes = "; ".join(f"{a.label} ({a.n_points()} values)" for a in cfg.sweep.axes)
     console.print(f"{config}: valid; {cfg.sweep.mode} over {axes} -> {n} jobs"
                   + (" (baseline included)" if cfg.sweep.baseline else ""))
+
+
+def _check_design_sections(d: Any) -> None:
+    """A design config's ``identify:`` settings against the closed-loop schema and its
+    ``tune:`` overrides on the bundled tuning config (an unknown key named, never dropped)."""
+    from ema_cli.api.design import DEFAULT_TUNE_CONFIG
+    from ema_cli.config.loader import dotted_pairs, load_config
+    from ema_cli.config.tune import TuneConfig
+    from ema_cli.identify.log_settings import ClosedLoopSettings
+
+    for key, check in (("identify", lambda: load_config(
+            {**d.identify, "name": d.identify.get("name", d.name)}, [], ClosedLoopSettings)),
+                       ("tune", lambda: load_config(DEFAULT_TUNE_CONFIG, dotted_pairs(d.tune),
+                                                    TuneConfig))):
+        try:
+            check()
+        except EmaError as exc:
+            raise EmaError(f"{key}: {exc.message}") from None
 
 
 def _check_actuator(actuator: Any, config: Path) -> None:

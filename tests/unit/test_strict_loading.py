@@ -96,3 +96,17 @@ def test_sensitivity_refuses_an_unknown_key(tmp_path):
     r = CliRunner().invoke(app, ["sensitivity", str(tmp_path / "s.yaml"), "--out",
                                  str(tmp_path / "out")])
     assert r.exit_code == 2 and "s.yaml: plnat: unknown key" in r.output
+
+
+@pytest.mark.parametrize(("section", "needle"), [
+    ("identify: {shootng: {starts: 4}}\n", "identify: dict: shootng: unknown key"),
+    ("tune: {optimser: {pop: 16}}\n", "unknown key 'optimser'"),
+])
+def test_validate_checks_a_design_configs_sections(tmp_path, section, needle):
+    # a design config's sections belong to other schemas: validate checks them there
+    path = tmp_path / "d.yaml"
+    path.write_text("name: d\n" + section)
+    r = CliRunner().invoke(app, ["validate", str(path), "--kind", "design"])
+    assert r.exit_code == 2 and needle in " ".join(r.output.split()), r.output
+    r = CliRunner().invoke(app, ["validate", str(ROOT / "configs" / "design_ci.yaml")])
+    assert r.exit_code == 0, r.output
