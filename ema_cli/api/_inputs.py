@@ -151,3 +151,19 @@ def check_sensitivity_steps(cfg: Any, method: str | None, n: int | None, source:
     check_steps(runs * steps, f"{source}: {runs:,} runs ({method}, n = {n}) x {steps:.3g} "
                               "steps", "lower n, shorten simulation.duration_s or raise "
                                        "simulation.dt_s")
+
+
+def capped_jobs(n_jobs: int | None, cfg: Any, backend: str | None) -> int | None:
+    """``n_jobs`` (else the config's ``parallel.n_jobs``) capped at the cores available, with
+    a warning, unless a dask cluster runs the jobs (:func:`ema_cli.limits.cap_workers`)."""
+    import warnings
+
+    from ema_cli.limits import cap_workers
+
+    par = getattr(cfg, "parallel", None)
+    given = n_jobs if n_jobs is not None else getattr(par, "n_jobs", None)
+    cluster = (backend or getattr(par, "backend", None)) == "dask"
+    out, note = cap_workers(given, "n_jobs", cluster=cluster)
+    if note:
+        warnings.warn(note, stacklevel=3)
+    return out

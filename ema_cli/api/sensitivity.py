@@ -124,6 +124,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     from ema_cli.api._inputs import check_sensitivity_steps
 
     check_sensitivity_steps(cfg, method, n, source_name(config))
+    from ema_cli.api._inputs import capped_jobs
+
+    n_jobs = capped_jobs(n_jobs, cfg, backend)
     res = run_sensitivity(cfg, None, method, n, n_jobs=n_jobs, backend=backend, force=force,
                           progress=progress,
                           cache_dir=Path(cache_dir) if cache_dir is not None else None,

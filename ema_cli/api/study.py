@@ -154,6 +154,9 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
     check_sweep_steps(cfg, source_name(config))
+    from ema_cli.api._inputs import capped_jobs
+
+    n_jobs = capped_jobs(n_jobs, cfg, backend)
     res = run_sweep(cfg, None, n_jobs, backend, force, progress,
                     cache_dir=Path(cache_dir) if cache_dir is not None else None,
                     base_dir=base_dir(config), source=source_name(config), overrides=pairs,

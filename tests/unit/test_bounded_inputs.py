@@ -96,3 +96,13 @@ def test_sweeps_sensitivity_and_tuning_are_bounded_too(tmp_path):
                             "--set", f"sweep.axes.0.values={values}",
                             "--out", str(tmp_path / "s")])
     assert r.exit_code == 2 and "more than the cap of 1e+11" in " ".join(r.output.split())
+
+
+def test_the_api_caps_workers_too():
+    from ema_cli.api import sweep
+
+    have = cores()
+    with pytest.warns(UserWarning, match=f"n_jobs {have + 6} is more than the {have} cores"):
+        res = sweep("configs/deadzone2.yaml", {"simulation.duration_s": 0.01},
+                    n_jobs=have + 6)
+    assert len(res.metrics) == 4  # 3 values and the baseline
