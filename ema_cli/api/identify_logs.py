@@ -146,7 +146,7 @@ def check_log_steps(cfg: Any, duration: float, source: str) -> None:
             raise EmaError(f"{key}: one pass over the {duration:.4g} s log '{source}' at "
                            f"{key} = {dt:g} s is {steps:.3g} integration steps, more than "
                            f"{MAX_RUN_STEPS:.0e} per pass (each evaluation of the fit is one); "
-                           f"raise {key} or cut the log with window")
+                           f"raise {key} or cut the log with window (T0, T1) [s]")
 
 
 def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = None,

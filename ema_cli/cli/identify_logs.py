@@ -198,8 +198,9 @@ def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | 
     from ema_cli.api.identify_logs import identify_closed_loop
 
     report_stage("reading the log, loading the kernel")
-    ident = as_options(lambda: identify_closed_loop(config, pairs), window="--window",
-                       data="--data")
+    ident = as_options(lambda: identify_closed_loop(config, pairs),
+                       **{"with window (T0, T1) [s]": "with --window T0,T1",
+                          "data: out of memory": "--data: out of memory"})
     fit = ident.result
     report_stage("writing files and figures")
     folder = ident.save(out)
