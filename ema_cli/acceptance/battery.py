@@ -31,8 +31,7 @@ are compared in :func:`verdicts`. What each test does (docs/model.md, "Acceptanc
 from __future__ import annotations
 
 import math
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -60,18 +59,35 @@ THRESHOLD_ROUNDS = 12  # k-section rounds at most [-]
 BRANCH_MARGIN = 0.8  # loop widths are read where |command| <= this share of A [-]
 REVERSAL_SHARE = 0.02  # load moving against its branch this often: a limit cycle [-]
 REFINE_ROUNDS, REFINE_POINTS = 2, 8  # dynamic-stiffness refinement around the minimum [-]
+PEAK_DC_DB = 0.5  # a peak gain at the lowest frequency above this is not the loop's DC level [dB]
+FOLLOW_SHARE = 0.5  # the hysteresis reads a loop when the load spans this share of 2A [-]
+FIT_RMS_SHARE = 0.02  # load deflection: the two-line fit's rms residual, at most, per span [-]
 
 
 @dataclass(frozen=True)
 class Measurement:
-    """One measured value: the metric, a condition (``""``, ``"5 deg"``, ``"position loop"``),
-    the value in SI (``si_unit``), and a note (e.g. "below the search range")."""
+    """One value: the metric, a condition (``""``, ``"5 deg"``, ``"position loop"``), the value
+    in SI (``si_unit``), and a note (e.g. "at 36.5 Hz").
+
+    A value read inside the test's measurable range has ``reason == ""``. Otherwise the test
+    only bounds it: the true value lies in ``[lower, upper]`` (SI, one side infinite), ``value``
+    is the finite edge, and ``reason`` says why and which setting widens the range ("bandwidth
+    above the highest frequency measured, 2 Hz: widen f_max_hz"). :func:`judge` decides such a
+    bound only when the whole interval lies on one side of the limit."""
 
     metric: str
     condition: str
     value: float
     si_unit: str
     note: str = ""
+    lower: float = -math.inf
+    upper: float = math.inf
+    reason: str = ""
+
+    @property
+    def measured(self) -> bool:
+        """Whether ``value`` was measured inside the measurable range."""
+        return not self.reason
 
 
 @dataclass
@@ -91,6 +107,16 @@ class TestRun:
 
 def _m(kind: str, metric: str, condition: str, value: float, note: str = "") -> Measurement:
     return Measurement(metric, condition, float(value), SI_UNIT[METRICS[kind][metric]], note)
+
+
+def _bound(kind: str, metric: str, condition: str, lower: float, upper: float, reason: str,
+           note: str = "") -> Measurement:
+    """A value known only to lie in ``[lower, upper]`` (SI): not measured, for ``reason``."""
+    edge = lower if math.isfinite(lower) and lower > 0 else upper
+    if not math.isfinite(edge):
+        edge = math.nan
+    return Measurement(metric, condition, float(edge), SI_UNIT[METRICS[kind][metric]], note,
+                       float(lower), float(upper), reason)
 
 
 def _simulate(params: Mapping[str, float], signals: list[Any], dt: float, duration: float,
@@ -126,14 +152,35 @@ def run_step(name: str, test: StepTest, params: Mapping[str, float], dt: float) 
                     duration, _interval(duration, dt, 10000))
     met = res.metrics[0]
     cond = f"{test.amplitude_deg:g} deg"
-    settle = met[MET["settling_time"]]
-    out = [_m("step", "rise_time", cond, met[MET["rise_time"]]),
-           _m("step", "overshoot", cond, met[MET["overshoot"]]),
-           _m("step", "settling_time", cond, settle if math.isfinite(settle) else math.inf,
-              "" if math.isfinite(settle) else "not settled by the end of the run"),
-           _m("step", "steady_state_error", cond, abs(met[MET["ss_err_pos"]])),
-           _m("step", "peak_current", cond, met[MET["peak_current"]])]
+    settle, rise = met[MET["settling_time"]], met[MET["rise_time"]]
     notes = ["diverged"] if res.diverged[0] else []
+    out = []
+    if res.diverged[0] or math.isfinite(settle):
+        # settled within the run (or diverged: NaN values, judged INCONCLUSIVE)
+        out += [_m("step", "rise_time", cond, rise),
+                _m("step", "overshoot", cond, met[MET["overshoot"]]),
+                _m("step", "settling_time", cond, settle),
+                _m("step", "steady_state_error", cond, abs(met[MET["ss_err_pos"]])),
+                _m("step", "peak_current", cond, met[MET["peak_current"]])]
+    else:
+        end = f"by the end of the run, {duration:g} s: lengthen duration_s"
+        if math.isfinite(rise):
+            out.append(_m("step", "rise_time", cond, rise))
+        else:
+            # 90 % not reached: the rise takes longer than from the 10 % crossing to the end
+            share = res.signal("theta_load") / (test.amplitude_deg * DEG)
+            k10 = np.flatnonzero(share >= 0.1)
+            low = duration - res.t_out[k10[0]] if len(k10) else 0.0
+            out.append(_bound("step", "rise_time", cond, low, math.inf,
+                              f"the load did not reach 90 % of the step {end}"))
+        out += [_bound("step", "overshoot", cond, met[MET["overshoot"]], math.inf,
+                       f"the load had not settled {end} (the overshoot may still grow)"),
+                _bound("step", "settling_time", cond, duration, math.inf,
+                       f"not settled within 2 % {end}"),
+                _bound("step", "steady_state_error", cond, 0.0, math.inf,
+                       f"no steady state: the load had not settled {end}"),
+                _bound("step", "peak_current", cond, met[MET["peak_current"]], math.inf,
+                       f"the load had not settled {end} (the current may still peak)")]
     return TestRun(name, "step", out, {"t": res.t_out, "ref": res.signal("theta_ref"),
                                        "load": res.signal("theta_load"),
                                        "amplitude_deg": test.amplitude_deg}, notes=notes)
@@ -159,21 +206,34 @@ def run_frequency_response(name: str, test: FrequencyResponseTest, params: Mappi
         g = np.array([p.gain_db for p in blk])
         cond = f"{a:g} deg"
         bw = crossing(f, g, -3.0)
-        note = ""
-        if not math.isfinite(bw):
-            if g[-1] > -3.0 and np.all(g > -3.0):
-                bw, note = math.inf, f"gain above -3 dB up to {f[-1]:.3g} Hz"
-            else:
-                bw, note = 0.0, f"gain below -3 dB from {f[0]:.3g} Hz"
         lim = binding_limit(blk, bw if math.isfinite(bw) else math.nan)
-        if lim is not None:
-            note = (note + "; " if note else "") + f"binding limit {lim}"
-        out.append(_m("frequency_response", "bandwidth", cond, bw, note))
+        note = f"binding limit {lim}" if lim is not None else ""
+        if math.isfinite(bw):
+            out.append(_m("frequency_response", "bandwidth", cond, bw, note))
+        elif np.all(g > -3.0):
+            out.append(_bound("frequency_response", "bandwidth", cond, f[-1], math.inf,
+                              f"bandwidth above the highest frequency measured, {f[-1]:.3g} "
+                              "Hz: widen f_max_hz", note))
+        else:
+            out.append(_bound("frequency_response", "bandwidth", cond, 0.0, f[0],
+                              f"bandwidth below the lowest frequency measured, {f[0]:.3g} Hz: "
+                              "lower f_min_hz", note))
         if f_at is not None:
             j = int(np.argmin(np.abs(f - f_at)))
             out.append(_m("frequency_response", "phase_lag", f"{cond} at {f_at:.4g} Hz",
                           -blk[j].phase_deg * DEG))
-        out.append(_m("frequency_response", "peak_gain", cond, float(np.max(g))))
+        k = int(np.argmax(g))
+        if k == len(g) - 1 and len(g) > 1:
+            out.append(_bound("frequency_response", "peak_gain", cond, float(g[k]), math.inf,
+                              f"the gain is highest at the highest frequency measured, "
+                              f"{f[k]:.4g} Hz (it may rise further): widen f_max_hz"))
+        elif k == 0 and g[0] > PEAK_DC_DB:
+            out.append(_bound("frequency_response", "peak_gain", cond, float(g[k]), math.inf,
+                              f"the gain is highest, {g[0]:.3g} dB, at the lowest frequency "
+                              f"measured, {f[0]:.4g} Hz (it may rise below): lower f_min_hz"))
+        else:
+            out.append(_m("frequency_response", "peak_gain", cond, float(g[k]),
+                          f"at {f[k]:.4g} Hz"))
         if any(p.diverged for p in blk):
             notes.append(f"{cond}: diverged at some frequency")
     fs = np.array([p.f_hz for p in points[:nf]])
@@ -184,22 +244,40 @@ def run_frequency_response(name: str, test: FrequencyResponseTest, params: Mappi
 
 def run_margins(name: str, test: MarginsTest, params: Mapping[str, float], dt: float) -> TestRun:
     from ema_cli.analysis.linear import loop_transfer, margins
+    from ema_cli.config.acceptance import MARGINS_F_MIN_HZ
 
     out = []
     loops = {}
     res = {}
     f = np.geomspace(0.1, 1e4, 2000)
+    f_top = test.f_max_hz
     for loop in test.loops:
-        m = margins(params, loop)
+        m = margins(params, loop, f_min=MARGINS_F_MIN_HZ, f_max=f_top)
         res[loop] = m
         loops[loop] = loop_transfer(params, loop, f)
+        L_top, L_below, L_bottom = (abs(complex(x)) for x in loop_transfer(
+            params, loop, np.array([f_top, f_top / 1.01, MARGINS_F_MIN_HZ])))
+        # above f_top, |L| is taken to keep falling if it falls at f_top (strictly proper)
+        falls = L_top < 1.0 and L_top < L_below
+        top = (f"up to f_max_hz = {f_top:g} Hz (|L| = {20 * math.log10(L_top):.3g} dB there"
+               f"{'' if falls else ', not falling'}): widen f_max_hz")
         cond = f"{loop} loop"
-        out.append(_m("margins", "gain_margin", cond, m.gm_db,
-                      f"at {m.f_gm_hz:.4g} Hz" if math.isfinite(m.f_gm_hz)
-                      else "no phase crossover"))
-        out.append(_m("margins", "phase_margin", cond, m.pm_deg * DEG,
-                      f"at {m.f_pm_hz:.4g} Hz" if math.isfinite(m.f_pm_hz)
-                      else "no gain crossover"))
+        if math.isfinite(m.f_gm_hz):
+            out.append(_m("margins", "gain_margin", cond, m.gm_db, f"at {m.f_gm_hz:.4g} Hz"))
+        else:
+            # no phase crossover up to f_top: one above it has |L| < |L(f_top)|
+            low = -20.0 * math.log10(L_top) if falls else -math.inf
+            out.append(_bound("margins", "gain_margin", cond, low, math.inf,
+                              f"no phase crossover {top}", "no phase crossover"))
+        if math.isfinite(m.f_pm_hz):
+            out.append(_m("margins", "phase_margin", cond, m.pm_deg * DEG,
+                          f"at {m.f_pm_hz:.4g} Hz"))
+        elif falls and L_bottom < 1.0:
+            out.append(_m("margins", "phase_margin", cond, math.inf,
+                          f"no gain crossover: |L| < 1 from {MARGINS_F_MIN_HZ:g} Hz up"))
+        else:
+            out.append(_bound("margins", "phase_margin", cond, -math.pi, math.pi,
+                              f"no gain crossover {top}"))
     return TestRun(name, "margins", out, {"f_hz": f, "loops": loops, "margins": res},
                    notes=["linear limit: saturations, dead zones and backlash removed, friction "
                           "viscous, controller continuous"])
@@ -228,7 +306,6 @@ def run_threshold(name: str, test: ThresholdTest, params: Mapping[str, float],
             tried[float(a)] = float(frac)
 
     evaluate(np.geomspace(lo, hi, THRESHOLD_BATCH))
-    note = ""
     for _ in range(THRESHOLD_ROUNDS):
         amps = sorted(tried)
         ok = [tried[a] >= test.fraction for a in amps]
@@ -243,16 +320,23 @@ def run_threshold(name: str, test: ThresholdTest, params: Mapping[str, float],
         evaluate(np.geomspace(a_f, a_p, THRESHOLD_BATCH + 2)[1:-1])
     amps = sorted(tried)
     ok = [tried[a] >= test.fraction for a in amps]
+    cond = f"{100 * test.fraction:g} % within {test.within_s:g} s"
     if all(ok):
-        value, note = amps[0], f"followed at every step down to the search minimum {lo / DEG:g} deg"
+        value = amps[0]
+        m = _bound("threshold", "threshold", cond, 0.0, value,
+                   f"followed at every step down to the search minimum {lo / DEG:g} deg: "
+                   "lower search_deg")
     elif not ok[-1]:
-        value, note = math.inf, f"not followed even at the search maximum {hi / DEG:g} deg"
+        value = math.inf
+        m = _bound("threshold", "threshold", cond, hi, math.inf,
+                   f"not followed even at the search maximum {hi / DEG:g} deg: raise "
+                   "search_deg")
     else:
         last_fail = max(k for k, v in enumerate(ok) if not v)
         value = amps[last_fail + 1]
-        note = f"between {amps[last_fail] / DEG:.4g} and {value / DEG:.4g} deg"
-    cond = f"{100 * test.fraction:g} % within {test.within_s:g} s"
-    return TestRun(name, "threshold", [_m("threshold", "threshold", cond, value, note)],
+        m = _m("threshold", "threshold", cond, value,
+               f"between {amps[last_fail] / DEG:.4g} and {value / DEG:.4g} deg")
+    return TestRun(name, "threshold", [m],
                    {"tried": tried, "fraction": test.fraction, "value": value})
 
 
@@ -302,14 +386,23 @@ def run_hysteresis(name: str, test: HysteresisTest, params: Mapping[str, float],
     cond = f"{test.amplitude_deg:g} deg, {4 * test.amplitude_deg / P:.3g} deg/s"
     notes = ["diverged"] if res.diverged[0] else []
     reversing = _reversals(y, c, up, A) + _reversals(-y, c, down, A)
-    note = ""
-    if reversing > REVERSAL_SHARE:
-        note = (f"the load reverses on {100 * reversing:.0f} % of the branches (a limit cycle): "
-                "the free play is not read reliably; close the loop on the motor angle for "
-                "this test (set: {controller.position_feedback: motor})")
-        notes.append(note)
-    out = [_m("hysteresis", "hysteresis", cond, width),
-           _m("hysteresis", "free_play", cond, abs(play), note)]
+    span = y_hi - y_lo
+    if not span >= FOLLOW_SHARE * 2 * A:
+        why = (f"the load moved {span / DEG:.3g} deg on the last period, less than "
+               f"{100 * FOLLOW_SHARE:g} % of the command's {2 * test.amplitude_deg:g} deg: no "
+               "loop to read; raise amplitude_deg")
+        out = [_bound("hysteresis", "hysteresis", cond, 0.0, math.inf, why),
+               _bound("hysteresis", "free_play", cond, 0.0, math.inf, why)]
+    elif reversing > REVERSAL_SHARE:
+        why = (f"the load reverses on {100 * reversing:.0f} % of the branches (a limit cycle): "
+               "the free play is not read reliably; close the loop on the motor angle for "
+               "this test (set: {controller.position_feedback: motor})")
+        notes.append(why)
+        out = [_m("hysteresis", "hysteresis", cond, width),
+               _bound("hysteresis", "free_play", cond, 0.0, math.inf, why)]
+    else:
+        out = [_m("hysteresis", "hysteresis", cond, width),
+               _m("hysteresis", "free_play", cond, abs(play))]
     return TestRun(name, "hysteresis", out, {"t": t, "ref": c, "load": y, "motor": xm,
                                              "rising": up, "falling": down}, notes=notes)
 
@@ -336,13 +429,30 @@ def run_load_deflection(name: str, test: LoadDeflectionTest, params: Mapping[str
     pos, neg = tq >= edge, tq <= -edge
     # theta_L = s*T + b_pos on the positive branch, s*T + b_neg on the negative one
     X = np.column_stack([tq[pos | neg], pos[pos | neg], neg[pos | neg]]).astype(float)
+    if not (pos.any() and neg.any()):
+        raise EmaError(f"test {name}: no recorded load torque beyond fit_fraction on both "
+                       "branches; lengthen period_s")
     (s, b_pos, b_neg), *_ = np.linalg.lstsq(X, y[pos | neg], rcond=None)
-    if not s > 0:
-        raise EmaError(f"test {name}: the load does not deflect with the torque (slope {s:g} "
-                       "rad/(N*m)); is the motor really locked and the transmission elastic?")
     cond = f"+-{test.torque_nm:g} N*m, motor locked"
-    out = [_m("load_deflection", "stiffness", cond, 1.0 / s),
-           _m("load_deflection", "free_play", cond, b_pos - b_neg)]
+    fitted = y[pos | neg]
+    rms = float(np.sqrt(np.mean((X @ np.array([s, b_pos, b_neg]) - fitted) ** 2)))
+    spread = float(np.ptp(fitted)) if len(fitted) else 0.0
+    if not (s > 0 and np.isfinite(rms)):
+        why = (f"the load angle does not follow the torque along a line (slope {s:.3g} "
+               "rad/(N*m)): lengthen period_s (slower than the load's resonance), and check "
+               "that the motor is locked and the transmission elastic")
+    elif rms > FIT_RMS_SHARE * spread:
+        why = (f"the load angle is not one line per branch where |T| >= fit_fraction*T (rms "
+               f"residual {100 * rms / spread:.3g} % of its span, over "
+               f"{100 * FIT_RMS_SHARE:g} %): raise fit_fraction or lengthen period_s")
+    else:
+        why = ""
+    if why:
+        out = [_bound("load_deflection", "stiffness", cond, 0.0, math.inf, why),
+               _bound("load_deflection", "free_play", cond, 0.0, math.inf, why)]
+    else:
+        out = [_m("load_deflection", "stiffness", cond, 1.0 / s),
+               _m("load_deflection", "free_play", cond, b_pos - b_neg)]
     return TestRun(name, "load_deflection", out,
                    {"torque": tq, "load": y, "slope": s, "b_pos": b_pos, "b_neg": b_neg,
                     "fit_from": test.fit_fraction * test.torque_nm},
@@ -369,8 +479,14 @@ def run_dynamic_stiffness(name: str, test: DynamicStiffnessTest, params: Mapping
     k = int(np.argmin([p.stiffness for p in pts]))
     f = np.array([p.f_hz for p in pts])
     cond = f"{test.amplitude_nm:g} N*m, {test.f_min_hz:g}-{test.f_max_hz:g} Hz"
-    out = [_m("dynamic_stiffness", "dynamic_stiffness", cond, pts[k].stiffness,
-              f"at {pts[k].f_hz:.4g} Hz")]
+    if k in (0, len(pts) - 1):
+        edge, key = (("lowest", "lower f_min_hz") if k == 0 else ("highest", "widen f_max_hz"))
+        out = [_bound("dynamic_stiffness", "dynamic_stiffness", cond, 0.0, pts[k].stiffness,
+                      f"the minimum lies at the {edge} frequency measured, {pts[k].f_hz:.4g} Hz "
+                      f"(it may fall beyond): {key}", f"at {pts[k].f_hz:.4g} Hz")]
+    else:
+        out = [_m("dynamic_stiffness", "dynamic_stiffness", cond, pts[k].stiffness,
+                  f"at {pts[k].f_hz:.4g} Hz")]
     lin = linear_model(params).response(f, inp="torque_disturbance")
     reached = sorted({x for p in pts for x in p.limits})
     return TestRun(name, "dynamic_stiffness", out,
@@ -386,32 +502,34 @@ def run_no_load_rate(name: str, test: NoLoadRateTest, params: Mapping[str, float
     res = _simulate(params, [InputSignal(kind="step", amplitude=test.amplitude_deg * DEG)], dt,
                     duration, _interval(duration, dt, 10000))
     cond = f"{test.amplitude_deg:g} deg step"
-    return TestRun(name, "no_load_rate",
-                   [_m("no_load_rate", "rate", cond, res.metrics[0, MET["peak_load_rate"]])],
+    rate = res.metrics[0, MET["peak_load_rate"]]
+    w = np.abs(res.signal("omega_load"))
+    if len(w) > 2 and np.all(np.isfinite(w)) and int(np.argmax(w)) >= len(w) - 2:
+        m = _bound("no_load_rate", "rate", cond, rate, math.inf,
+                   f"the load was still accelerating at the end of the run, {duration:g} s: "
+                   "lengthen duration_s")
+    else:
+        m = _m("no_load_rate", "rate", cond, rate)
+    return TestRun(name, "no_load_rate", [m],
                    {"t": res.t_out, "rate": res.signal("omega_load"),
                     "amplitude_deg": test.amplitude_deg},
                    notes=["diverged"] if res.diverged[0] else [])
 
 
-RUNNERS: dict[str, Callable[[str, Any, Mapping[str, float], float], TestRun]] = {
-    "step": run_step, "frequency_response": run_frequency_response, "margins": run_margins,
-    "threshold": run_threshold, "hysteresis": run_hysteresis,
-    "load_deflection": run_load_deflection, "dynamic_stiffness": run_dynamic_stiffness,
-    "no_load_rate": run_no_load_rate,
-}
-
-
-def run_test(name: str, test: Any, params: Mapping[str, float], dt: float) -> TestRun:
-    """Run one test of a spec, timed."""
-    t0 = time.perf_counter()
-    run = RUNNERS[test.test](name, test, params, dt)
-    run.wall_s = time.perf_counter() - t0
-    return run
+PASS, FAIL, INCONCLUSIVE = "PASS", "FAIL", "INCONCLUSIVE"
+EXIT_CODES = {PASS: 0, FAIL: 1, INCONCLUSIVE: 3}
+"""``ema acceptance``'s exit code per overall verdict (2 stays bad usage or input)."""
 
 
 @dataclass(frozen=True)
 class Verdict:
-    """One row of the PASS/FAIL table: a measurement against its limit, in the limit's unit."""
+    """One row of the verdict table: a measurement against its limit, in the limit's unit.
+
+    ``result`` is PASS or FAIL for a measured value; for a bound (``measured`` false, the
+    value known only to lie in ``[lower, upper]``) PASS or FAIL only when the whole interval
+    lies inside or outside the limit, else INCONCLUSIVE with ``reason`` naming the setting to
+    change. A value that is not a number (a diverged run) is INCONCLUSIVE. ``lower`` and
+    ``upper`` (in ``unit``) equal ``value`` for a measured value."""
 
     test: str
     kind: str
@@ -421,14 +539,43 @@ class Verdict:
     min: float | None
     max: float | None
     unit: str
-    passed: bool
+    result: str
+    measured: bool
+    lower: float
+    upper: float
     value_si: float
     si_unit: str
     note: str
+    reason: str
+
+    @property
+    def passed(self) -> bool:
+        return self.result == PASS
+
+
+def judge(m: Measurement, lo: float, hi: float) -> tuple[str, str]:
+    """(PASS | FAIL | INCONCLUSIVE, reason) of ``m`` against the SI bounds ``lo``..``hi``."""
+    if m.measured:
+        if math.isnan(m.value):
+            return INCONCLUSIVE, "not measured (the simulation diverged: check the actuator " \
+                                 "or reduce simulation.dt_s)"
+        return (PASS if lo <= m.value <= hi else FAIL), ""
+    if lo <= m.lower and m.upper <= hi:
+        return PASS, ""
+    if m.upper < lo or m.lower > hi:
+        return FAIL, ""
+    return INCONCLUSIVE, m.reason
+
+
+def overall(results: list[str]) -> str:
+    """FAIL if any row fails, else INCONCLUSIVE if any is inconclusive, else PASS."""
+    if FAIL in results:
+        return FAIL
+    return INCONCLUSIVE if INCONCLUSIVE in results else PASS
 
 
 def verdicts(run: TestRun, limits: Mapping[str, Any]) -> list[Verdict]:
-    """Each measurement of ``run`` with a limit, compared in SI (NaN fails)."""
+    """Each measurement of ``run`` with a limit, compared in SI (:func:`judge`)."""
     from ema_cli.units import from_si
 
     out = []
@@ -437,7 +584,15 @@ def verdicts(run: TestRun, limits: Mapping[str, Any]) -> list[Verdict]:
         if lim is None:
             continue
         lo, hi = lim.si()
-        ok = bool(lo <= m.value <= hi)  # NaN compares False: fails
-        out.append(Verdict(run.name, run.kind, m.metric, m.condition, from_si(m.value, lim.unit),
-                           lim.min, lim.max, lim.unit, ok, m.value, m.si_unit, m.note))
+        result, reason = judge(m, lo, hi)
+        note = m.note
+        if not m.measured and result != INCONCLUSIVE:  # the bound, without the advice
+            bound = m.reason.rsplit(": ", 1)[0]
+            note = "; ".join(x for x in (note, f"decided on a bound: {bound}")
+                             if x and x not in bound)
+        lower, upper = (m.value, m.value) if m.measured else (m.lower, m.upper)
+        out.append(Verdict(run.name, run.kind, m.metric, m.condition,
+                           from_si(m.value, lim.unit), lim.min, lim.max, lim.unit, result,
+                           m.measured, from_si(lower, lim.unit), from_si(upper, lim.unit),
+                           m.value, m.si_unit, note, reason))
     return out

@@ -60,6 +60,17 @@ def snap_frequency(f_hz: float, dt: float) -> tuple[float, int, int]:
     return 1.0 / (dec * spp * dt), dec, spp
 
 
+def sinestream_steps(freqs_hz: Sequence[float], dt: float, n_cases: int = 1) -> float:
+    """The integration steps of a sinestream (cases x steps, summed over the frequencies),
+    computed before any run: each frequency settles max(3 periods, 0.3 s) and measures 4."""
+    total = 0.0
+    for f in freqs_hz:
+        period_steps = 1.0 / (float(f) * dt)
+        settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * float(f)))
+        total += (settle + MEASURE_PERIODS) * period_steps
+    return total * n_cases
+
+
 def _bin(y: np.ndarray, k: int) -> complex:
     """The DFT bin of ``k`` cycles per ``len(y)`` samples, as a complex amplitude."""
     n = len(y)

@@ -65,3 +65,105 @@ def source_name(config: ConfigSource) -> str:
     if isinstance(config, Mapping):
         return "dict"
     return type(config).__name__
+
+
+def number_arg(value: Any, name: str, *, low: float | None = None, high: float | None = None,
+               low_open: bool = False, integer: bool = False, optional: bool = True) -> Any:
+    """``value`` as a finite number (an int when ``integer``) within ``low``..``high``, or None
+    when None and ``optional``; else EmaError naming the argument ``name``."""
+    import math
+
+    if value is None and optional:
+        return None
+    kind = "an integer" if integer else "a finite number"
+    ok_type = isinstance(value, int) if integer else isinstance(value, int | float)
+    if isinstance(value, bool) or not ok_type or not math.isfinite(value):
+        raise EmaError(f"{name} must be {kind}, got {value!r}")
+    if low is not None and (value <= low if low_open else value < low):
+        raise EmaError(f"{name} must be {'>' if low_open else '>='} {low:g}, got {value!r}")
+    if high is not None and value > high:
+        raise EmaError(f"{name} must be <= {high:g}, got {value!r}")
+    return value
+
+
+def choice_arg(value: Any, name: str, choices: Sequence[str]) -> Any:
+    """``value`` one of ``choices`` (or None); else EmaError naming ``name``."""
+    if value is not None and (not isinstance(value, str) or value not in choices):
+        raise EmaError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
+    return value
+
+
+def flag_arg(value: Any, name: str) -> bool:
+    """``value`` a bool; else EmaError naming ``name``."""
+    if not isinstance(value, bool):
+        raise EmaError(f"{name} must be True or False, got {value!r}")
+    return value
+
+
+def callable_arg(value: Any, name: str) -> Any:
+    """``value`` a callable or None; else EmaError naming ``name``."""
+    if value is not None and not callable(value):
+        raise EmaError(f"{name} must be a function or None, got {value!r}")
+    return value
+
+
+def names_arg(value: Any, name: str) -> list[str] | None:
+    """``value`` a list of strings (a single string is one name) or None; else EmaError."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        return [value]
+    if not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value):
+        raise EmaError(f"{name} must be a list of names (str), got {value!r}")
+    return list(value)
+
+
+def path_arg(value: Any, name: str) -> Path | None:
+    """``value`` a path (str or Path) or None; else EmaError naming ``name``."""
+    if value is None:
+        return None
+    if not isinstance(value, str | Path) or not str(value):
+        raise EmaError(f"{name} must be a path (str or Path), got {value!r}")
+    return Path(value)
+
+
+def check_sweep_steps(cfg: Any, source: str) -> None:
+    """Refuse a sweep whose jobs x steps exceed :data:`ema_cli.limits.MAX_CASE_STEPS`."""
+    from ema_cli.limits import check_steps
+    from ema_cli.sweep.expand import check_size
+
+    if not cfg.sweep.axes:
+        return
+    n = check_size(cfg.sweep, source)  # the baseline included
+    steps = cfg.simulation.duration_s / cfg.simulation.dt_s
+    check_steps(n * steps, f"{source}: {n:,} jobs x {steps:.3g} steps",
+                "shrink sweep.axes, shorten simulation.duration_s or raise simulation.dt_s")
+
+
+def check_sensitivity_steps(cfg: Any, method: str | None, n: int | None, source: str) -> None:
+    """Refuse a sensitivity study whose runs x steps exceed the cap."""
+    from ema_cli.limits import check_steps
+    from ema_cli.sensitivity.run import resolve_method
+
+    method, n = resolve_method(cfg, method, n)
+    runs = cfg.runs(method, n)
+    steps = cfg.simulation.duration_s / cfg.simulation.dt_s
+    check_steps(runs * steps, f"{source}: {runs:,} runs ({method}, n = {n}) x {steps:.3g} "
+                              "steps", "lower n, shorten simulation.duration_s or raise "
+                                       "simulation.dt_s")
+
+
+def capped_jobs(n_jobs: int | None, cfg: Any, backend: str | None) -> int | None:
+    """``n_jobs`` (else the config's ``parallel.n_jobs``) capped at the cores available, with
+    a warning, unless a dask cluster runs the jobs (:func:`ema_cli.limits.cap_workers`)."""
+    import warnings
+
+    from ema_cli.limits import cap_workers
+
+    par = getattr(cfg, "parallel", None)
+    given = n_jobs if n_jobs is not None else getattr(par, "n_jobs", None)
+    cluster = (backend or getattr(par, "backend", None)) == "dask"
+    out, note = cap_workers(given, "n_jobs", cluster=cluster)
+    if note:
+        warnings.warn(note, stacklevel=3)
+    return out

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Sequence  # noqa: F401 - Sequence in hints
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,13 +32,35 @@ class AcceptanceResult:
     overrides: list[tuple[str, Any]] = field(default_factory=list)
 
     @property
+    def verdict(self) -> str:
+        """FAIL if any limit fails on a measured value (or a bound wholly outside it), else
+        INCONCLUSIVE if any value could not be measured against its limit, else PASS."""
+        from ema_cli.acceptance.battery import overall
+
+        return overall([v.result for v in self.verdicts])
+
+    @property
+    def exit_code(self) -> int:
+        """``ema acceptance``'s exit code: 0 PASS, 1 FAIL, 3 INCONCLUSIVE."""
+        from ema_cli.acceptance.battery import EXIT_CODES
+
+        return EXIT_CODES[self.verdict]
+
+    @property
     def passed(self) -> bool:
-        """Whether every limit of every test was met."""
-        return all(v.passed for v in self.verdicts)
+        """Whether every limit of every test was met (on measured values or decisive
+        bounds)."""
+        return self.verdict == "PASS"
 
     @property
     def failed(self) -> list[Verdict]:
-        return [v for v in self.verdicts if not v.passed]
+        """The rows that FAIL."""
+        return [v for v in self.verdicts if v.result == "FAIL"]
+
+    @property
+    def inconclusive(self) -> list[Verdict]:
+        """The rows that are INCONCLUSIVE (not measured inside the test's range)."""
+        return [v for v in self.verdicts if v.result == "INCONCLUSIVE"]
 
     @property
     def title(self) -> str:
@@ -50,14 +72,18 @@ class AcceptanceResult:
         return self.to_pandas()
 
     def to_pandas(self, form: str = "wide") -> pd.DataFrame:
-        """The PASS/FAIL table: test, kind, metric, condition, value, min, max, unit, passed,
-        value_si, si_unit, note (``wide``), or ``long`` (test, metric, condition, quantity,
-        value)."""
+        """The verdict table: test, kind, metric, condition, value, min, max, unit, result
+        (PASS, FAIL or INCONCLUSIVE), measured (inside the test's range), lower, upper (the
+        bound when not measured, in ``unit``), value_si, si_unit, note, reason (why
+        INCONCLUSIVE, naming the setting to change) (``wide``), or ``long`` (test, metric,
+        condition, quantity, value)."""
         import dataclasses
 
         import pandas as pd
 
         df = pd.DataFrame([dataclasses.asdict(v) for v in self.verdicts])
+        if len(df):
+            df.insert(df.columns.get_loc("result") + 1, "passed", df["result"] == "PASS")
         if form == "wide":
             return df
         if form != "long":
@@ -92,7 +118,8 @@ class AcceptanceResult:
                                 folder_arg(folder))
         write_acceptance(out, yaml.safe_dump(spec_json, sort_keys=False), self,
                          {"source": self.source, "wall_time_s": self.wall_time_s,
-                          "passed": self.passed, "parameters_si": self.params,
+                          "passed": self.passed, "verdict": self.verdict,
+                          "exit_code": self.exit_code, "parameters_si": self.params,
                           "overrides": [[k, v] for k, v in self.overrides],
                           "test_wall_s": {r.name: r.wall_s for r in self.runs}})
         finish_output(out)
@@ -107,20 +134,25 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     the named tests; ``progress(run)`` is called after each test."""
     import time
 
-    from ema_cli.acceptance.battery import run_test, verdicts
-    from ema_cli.config.acceptance import AcceptanceSpec
+    from ema_cli.acceptance.battery import verdicts
+    from ema_cli.acceptance.kinds import run_test
+    from ema_cli.config.acceptance import AcceptanceSpec, check_measurable
     from ema_cli.config.loader import dotted_pairs, load_config, resolve_run
     from ema_cli.config.study import StudyConfig
 
     if spec is None:
         raise EmaError("acceptance needs a spec (a YAML file such as configs/acceptance.yaml)")
+    from ema_cli.api._inputs import callable_arg, names_arg
+
+    only = names_arg(only, "only")
+    callable_arg(progress, "progress")
     pairs = override_pairs(overrides)
     sp = load_config(spec, pairs, AcceptanceSpec)
     names = list(sp.tests)
     if only:
         unknown = [n for n in only if n not in sp.tests]
         if unknown:
-            raise EmaError(f"--only: no test {unknown[0]!r} in the spec; tests: "
+            raise EmaError(f"only: no test {unknown[0]!r} in the spec; tests: "
                            f"{', '.join(names)}")
         names = [n for n in names if n in set(only)]
     act_source, act_dir = sp.actuator.source(base_dir(spec), "spec")
@@ -135,6 +167,12 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
         return run.params, run.dt
 
     params, dt = resolved([], "actuator")
+    setups = {}
+    for name in names:  # every test's actuator and time step, checked before any simulation
+        test = sp.tests[name]
+        setups[name] = (params, dt) if not test.overrides else resolved(
+            dotted_pairs(test.overrides), f"tests.{name}.set")
+        check_measurable(name, test, setups[name][1])
     t0 = time.perf_counter()
     runs = []
     rows = []
@@ -143,8 +181,7 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     for k, name in enumerate(names):
         report(f"test {k + 1}/{len(names)} {name} ({sp.tests[name].test})")
         test = sp.tests[name]
-        p, d = (params, dt) if not test.overrides else resolved(
-            dotted_pairs(test.overrides), f"tests.{name}.set")
+        p, d = setups[name]
         run = run_test(name, test, p, d)
         runs.append(run)
         rows += verdicts(run, test.limits)

@@ -13,9 +13,10 @@ Three steps, each the library call of its own command:
    (``nominal``) and on every corner of the identified 95 % intervals of the free parameters
    (2^p cases, one after the other: the battery takes one actuator at a time).
 
-The verdict: PASS when the nominal case and every corner pass, FAIL when any fails, and
-INCONCLUSIVE whenever the identification's optimum is not confirmed or a free parameter is not
-determined, whatever the batteries say: no PASS is built on an unconfirmed fit.
+The verdict: INCONCLUSIVE whenever the identification's optimum is not confirmed or a free
+parameter is not determined, whatever the batteries say: no PASS is built on an unconfirmed
+fit. Otherwise FAIL when any case's battery fails, else INCONCLUSIVE when any case's battery
+is INCONCLUSIVE (a value not measured inside its test's range), else PASS.
 """
 
 from __future__ import annotations
@@ -61,12 +62,26 @@ class DesignCase:
     def passed(self) -> bool:
         return self.result.passed
 
+    @property
+    def verdict(self) -> str:
+        """The battery's overall verdict: PASS, FAIL or INCONCLUSIVE."""
+        return self.result.verdict
+
     def test_verdicts(self) -> dict[str, bool]:
         """Per test of the spec: whether every limit of it was met."""
         out: dict[str, bool] = {}
         for v in self.result.verdicts:
             out[v.test] = out.get(v.test, True) and bool(v.passed)
         return out
+
+    def test_results(self) -> dict[str, str]:
+        """Per test of the spec: PASS, FAIL or INCONCLUSIVE (its rows, as the overall)."""
+        from ema_cli.acceptance.battery import overall
+
+        rows: dict[str, list[str]] = {}
+        for v in self.result.verdicts:
+            rows.setdefault(v.test, []).append(v.result)
+        return {t: overall(r) for t, r in rows.items()}
 
 
 @dataclass
@@ -89,7 +104,7 @@ class DesignResult:
     @property
     def verdict(self) -> str:
         """PASS, FAIL or INCONCLUSIVE (see the module's docstring)."""
-        return design_verdict(self.inconclusive, [c.passed for c in self.cases])
+        return design_verdict(self.inconclusive, [c.verdict for c in self.cases])
 
     @property
     def exit_code(self) -> int:
@@ -112,7 +127,9 @@ class DesignResult:
         return {
             "verdict": self.verdict,
             "exit_code": self.exit_code,
-            "inconclusive_because": self.inconclusive,
+            "inconclusive_because": self.inconclusive + [
+                f"acceptance {c.name}: {v.test}: {v.metric} ({v.condition}): {v.reason}"
+                for c in self.cases for v in c.result.inconclusive],
             "log": self.log,
             "identification": {
                 "parameters": ident, "optimum": js["optimum"],
@@ -132,7 +149,8 @@ class DesignResult:
             "acceptance": {
                 "spec": self.spec_source, "tests": self.tests,
                 "cases": [{"case": c.name, "parameters": c.values, "sides": c.sides,
-                           "passed": c.passed, "tests": c.test_verdicts(),
+                           "passed": c.passed, "verdict": c.verdict,
+                           "tests": c.test_verdicts(), "test_results": c.test_results(),
                            "failed_limits": [f"{v.test}: {v.metric} ({v.condition}) "
                                              f"{v.value:.4g} {v.unit}" for v in c.result.failed],
                            "folder": f"acceptance/{c.name}"} for c in self.cases]},
@@ -160,11 +178,16 @@ class DesignResult:
         return out
 
 
-def design_verdict(inconclusive: list[str], passed: list[bool]) -> str:
-    """INCONCLUSIVE when the fit gives a reason; else PASS if every case passed, else FAIL."""
-    if inconclusive or not passed:
+def design_verdict(inconclusive: list[str], cases: list[bool | str]) -> str:
+    """INCONCLUSIVE when the fit gives a reason (or there is no case); else FAIL if any case
+    fails, INCONCLUSIVE if any case is inconclusive, else PASS. ``cases``: each case's
+    acceptance verdict (PASS, FAIL, INCONCLUSIVE; a bool reads as PASS or FAIL)."""
+    if inconclusive or not cases:
         return "INCONCLUSIVE"
-    return "PASS" if all(passed) else "FAIL"
+    words = [("PASS" if c else "FAIL") if isinstance(c, bool) else c for c in cases]
+    if "FAIL" in words:
+        return "FAIL"
+    return "INCONCLUSIVE" if "INCONCLUSIVE" in words else "PASS"
 
 
 def primary_names(fit: Any) -> tuple[str, ...]:
@@ -327,11 +350,11 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
         raise EmaError(f"log '{log}' is not a file (a closed-loop log: CSV, Parquet or .mat)")
     tune_path = Path(tune_config) if tune_config is not None else DEFAULT_TUNE_CONFIG
     spec_path = Path(spec) if spec is not None else DEFAULT_SPEC
-    for p, what, opt in ((tune_path, "a tuning config", "--tune-config"),
-                         (spec_path, "an acceptance spec", "--spec")):
+    for p, what, arg in ((tune_path, "a tuning config", "tune_config"),
+                         (spec_path, "an acceptance spec", "spec")):
         if not p.is_file():
-            raise EmaError(f"{opt} '{p}' is not a file ({what}, e.g. configs/"
-                           f"{'tune' if opt == '--tune-config' else 'acceptance'}.yaml)")
+            raise EmaError(f"{arg} '{p}' is not a file ({what}, e.g. configs/"
+                           f"{'tune' if arg == 'tune_config' else 'acceptance'}.yaml)")
     pairs = override_pairs(overrides)
     by = split_overrides(pairs)
     cfg = load_config(config, [], DesignConfig)
@@ -352,7 +375,7 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
     load_config(spec_doc, [], AcceptanceSpec)
     if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int)
                                or budget < 1):
-        raise EmaError(f"--budget must be a positive integer, got {budget!r}")
+        raise EmaError(f"budget must be a positive integer, got {budget!r}")
     timings: dict[str, float] = {}
 
     say(f"1/3 identification of {log}")

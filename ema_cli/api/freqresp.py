@@ -171,6 +171,22 @@ class FrequencyResponse:
         return out
 
 
+def amplitude_list(values: Any, name: str = "amplitudes_deg") -> list[float]:
+    """``values`` as a list of finite amplitudes > 0 [deg] (EmaError naming ``name``)."""
+    from collections.abc import Sequence as Seq
+
+    if isinstance(values, str | bytes) or not isinstance(values, Seq) or not values:
+        raise EmaError(f"{name} must be a non-empty list of amplitudes > 0 [deg], got "
+                       f"{values!r}")
+    out = []
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v)
+                                                                        and v > 0):
+            raise EmaError(f"{name} must hold finite amplitudes > 0 [deg], got {v!r}")
+        out.append(float(v))
+    return out
+
+
 def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
              amplitudes_deg: Sequence[float] = DEFAULT_AMPLITUDES_DEG,
              f_min_hz: float = DEFAULT_F_MIN_HZ, f_max_hz: float = DEFAULT_F_MAX_HZ,
@@ -181,19 +197,21 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
 
     import numpy as np
 
-    from ema_cli.analysis.freqresp import sinestream
+    from ema_cli.analysis.freqresp import sinestream, sinestream_steps
     from ema_cli.analysis.linear import linear_model
     from ema_cli.config.loader import load_config, resolve_run
     from ema_cli.config.study import StudyConfig
+    from ema_cli.limits import check_steps
 
-    for v, name in ((f_min_hz, "--f-min"), (f_max_hz, "--f-max")):
-        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+    for v, name in ((f_min_hz, "f_min_hz"), (f_max_hz, "f_max_hz")):
+        if isinstance(v, bool) or not (isinstance(v, int | float) and math.isfinite(v)
+                                       and v > 0):
             raise EmaError(f"{name} must be a finite frequency > 0 [Hz], got {v!r}")
     if not f_min_hz < f_max_hz:
-        raise EmaError(f"--f-min ({f_min_hz:g} Hz) must be below --f-max ({f_max_hz:g} Hz)")
+        raise EmaError(f"f_min_hz ({f_min_hz:g} Hz) must be below f_max_hz ({f_max_hz:g} Hz)")
     if isinstance(n, bool) or not isinstance(n, int) or n < 2:
-        raise EmaError(f"--n must be an integer >= 2, got {n!r}")
-    amps = list(amplitudes_deg)
+        raise EmaError(f"n must be an integer >= 2, got {n!r}")
+    amps = amplitude_list(amplitudes_deg)
     if len(amps) * n > MAX_POINTS:
         raise EmaError(f"{len(amps)} amplitudes x {n} frequencies is more than {MAX_POINTS} "
                        "points")
@@ -201,6 +219,12 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
     cfg = load_config(config, pairs, StudyConfig)
     params = resolve_run(cfg, base_dir(config)).params
     f = np.geomspace(f_min_hz, f_max_hz, n)
+    dt = cfg.simulation.dt_s
+    check_steps(sinestream_steps(f, dt, len(amps)),
+                f"frequency response from {f_min_hz:g} Hz at dt_s = {dt:g} s ({len(amps)} "
+                f"amplitudes x {n} frequencies)",
+                "raise f_min_hz (each frequency settles 3 periods and measures 4), or use "
+                "fewer frequencies or amplitudes, or a larger simulation.dt_s")
     t0 = time.perf_counter()
     points = sinestream(params, amps, f, dt=cfg.simulation.dt_s)
     wall = time.perf_counter() - t0

@@ -178,10 +178,43 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
 
     pairs = override_pairs(overrides) + list(settings.items())
     cfg = load_config(config, pairs, ClosedLoopSettings)
+    from ema_cli.errors import EmaError
+
     log = None
     if cfg.data is not None:  # read here: the column map and the window belong to the reading
-        log = load_log(cfg.data, columns=cfg.columns, window=cfg.window)
-    return ClosedLoopIdentification(run_closed_loop(cfg, log))
+        try:
+            log = load_log(cfg.data, columns=cfg.columns, window=cfg.window)
+        except MemoryError:
+            size = Path(cfg.data).stat().st_size if Path(cfg.data).is_file() else 0
+            raise EmaError(f"data: out of memory reading the log '{cfg.data}' ({size:,} "
+                           "bytes); read a part of it with window (T0, T1) [s]") from None
+        check_log_steps(cfg, log.duration, str(cfg.data))
+    try:
+        return ClosedLoopIdentification(run_closed_loop(cfg, log))
+    except MemoryError:
+        what = (f"the {log.n:,}-row, {log.duration:.4g} s log '{cfg.data}'" if log is not None
+                else "the log")
+        raise EmaError(f"out of memory fitting {what} at dt_s = {cfg.dt_s:g} s: fit a part "
+                       "of it with window (T0, T1) [s], or raise dt_s") from None
+
+
+def check_log_steps(cfg: Any, duration: float, source: str) -> None:
+    """Refuse a closed-loop fit whose one pass over the log (``duration`` [s]) at its finest
+    step (``dt_s``, ``ga_dt_s``) exceeds :data:`ema_cli.limits.MAX_RUN_STEPS`: every evaluation
+    of the fit is such a pass (hundreds to thousands of them)."""
+    from ema_cli.errors import EmaError
+    from ema_cli.limits import MAX_RUN_STEPS
+
+    for key in ("dt_s", "ga_dt_s"):
+        dt = getattr(cfg, key, None)
+        if dt is None:
+            continue
+        steps = duration / dt
+        if steps > MAX_RUN_STEPS:
+            raise EmaError(f"{key}: one pass over the {duration:.4g} s log '{source}' at "
+                           f"{key} = {dt:g} s is {steps:.3g} integration steps, more than "
+                           f"{MAX_RUN_STEPS:.0e} per pass (each evaluation of the fit is one); "
+                           f"raise {key} or cut the log with window (T0, T1) [s]")
 
 
 def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = None,

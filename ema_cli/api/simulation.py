@@ -207,6 +207,7 @@ def simulate(
     """
     import numpy as np
 
+    from ema_cli.api._inputs import number_arg
     from ema_cli.config.loader import load_config, resolve_run
     from ema_cli.config.study import StudyConfig
     from ema_cli.model.params import to_row
@@ -214,6 +215,9 @@ def simulate(
     from ema_cli.sim.runner import simulate_batch
 
     t0 = time.perf_counter()
+    number_arg(step_deg, "step_deg")
+    number_arg(duration_s, "duration_s", low=0.0, low_open=True)
+    number_arg(dt_s, "dt_s", low=0.0, low_open=True)
     pairs = override_pairs(overrides)
     if step_deg is not None:
         pairs += [("input.kind", "step"), ("input.amplitude_deg", step_deg)]
@@ -231,5 +235,8 @@ def simulate(
     timings["kernel_load"] = res.load_s
     timings["simulation"] = res.kernel_s
     timings["total"] = time.perf_counter() - t0
+    from ema_cli.config.loader import inert_input_warnings
+
     return Simulation(cfg, run.params, run.signal, res, pairs, timings,
-                      resolution_warnings(run.params, run.dt))
+                      resolution_warnings(run.params, run.dt)
+                      + inert_input_warnings(run.signal, run.duration))

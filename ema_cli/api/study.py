@@ -179,6 +179,20 @@ def run_sweep(
                          keep_signals=not (write and plan.cfg.outputs.timeseries))
 
 
+def _parallel_args(n_jobs: Any, backend: Any, force: Any, progress: Any, cache_dir: Any) -> None:
+    """The parallel arguments of ``sweep`` and ``sensitivity``, checked (EmaError naming the
+    argument)."""
+    from ema_cli.api._inputs import choice_arg, flag_arg, number_arg, path_arg
+    from ema_cli.limits import BACKENDS, MAX_WORKERS
+
+    if n_jobs != -1:
+        number_arg(n_jobs, "n_jobs", low=1, high=MAX_WORKERS, integer=True)
+    choice_arg(backend, "backend", BACKENDS)
+    flag_arg(force, "force")
+    flag_arg(progress, "progress")
+    path_arg(cache_dir, "cache_dir")
+
+
 def plan(config: ConfigSource, overrides: Overrides = None) -> Plan:
     """The jobs a study config expands to, resolved (``sweep.plan.plan_sweep``: SI parameters,
     labels, cache keys, the reference), as ``ema show`` lists them; nothing runs but the
@@ -201,16 +215,22 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
     there (finished ones are reused by later calls); without it the recorded signals are kept
     in memory with the result. ``write`` True (or ``out`` given): the command's output folder
     is written as the sweep runs (``out``, default a new one under results/sweep/; an
-    unfinished run of the same sweep there is resumed) with the command's job cache.
+    unfinished run of the same sweep there is resumed) with the command's job cache. The
+    work is estimated first (refused above ``limits``' cap) and the workers capped at the
+    cores (a warning).
 
     n_jobs, backend, scheduler, force, progress   as the command's options
     figures  draw | none | background (drawn in a thread: call ``.finish()`` before exiting)
     """
+    from ema_cli.api._inputs import capped_jobs, check_sweep_steps
     from ema_cli.config.loader import load_config
     from ema_cli.config.study import StudyConfig
 
+    _parallel_args(n_jobs, backend, force, progress, cache_dir)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    check_sweep_steps(cfg, source_name(config))
+    n_jobs = capped_jobs(n_jobs, cfg, backend)
     res = run_sweep(cfg, folder_arg(out), n_jobs, backend, force, progress,
                     scheduler=scheduler,
                     cache_dir=Path(cache_dir) if cache_dir is not None else None,

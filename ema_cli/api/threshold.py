@@ -127,45 +127,44 @@ def threshold(
     import math
 
     from ema_cli.analysis.threshold import find_threshold, simulation_evaluator
+    from ema_cli.api._inputs import flag_arg, names_arg, number_arg
     from ema_cli.config.criteria import DEFAULT_RTOL, Criterion
     from ema_cli.config.loader import input_signal, load_config
     from ema_cli.config.study import StudyConfig
     from ema_cli.model.nonlinearities import lookup
 
-    if isinstance(require, str):
-        require = [require]
-    criteria = [Criterion.parse(str(r)) for r in require]
+    if not isinstance(vary, str) or not vary:
+        raise EmaError(f"vary must be the name of a nonlinearity or parameter (str), got "
+                       f"{vary!r}")
+    criteria = [Criterion.parse(r) for r in names_arg(require, "require") or []]
+    flag_arg(log, "log")
+    if metric is not None and not isinstance(metric, str):
+        raise EmaError(f"metric must be a metric name (str), got {metric!r}")
     if metric is not None or limit is not None:
         if metric is None or limit is None:
-            raise EmaError("--metric and --limit go together")
-        try:
-            limit = float(limit)
-        except (TypeError, ValueError):
-            raise EmaError(f"--limit must be a number, got {limit!r}") from None
+            raise EmaError("metric and limit go together")
+        limit = float(number_arg(limit, "limit"))
         crit = Criterion(str(metric), "<=", limit)
         crit.check()
         criteria.insert(0, crit)
     if not criteria:
-        raise EmaError("give at least one requirement: --metric with --limit, or --require "
+        raise EmaError("give at least one requirement: metric with limit, or require "
                        "METRIC<=VALUE")
     if direction not in ("max", "min"):
-        raise EmaError(f"--direction must be max or min, got {direction!r}")
-    rtol = DEFAULT_RTOL if rtol is None else float(rtol)
+        raise EmaError(f"direction must be max or min, got {direction!r}")
+    rtol = DEFAULT_RTOL if rtol is None else number_arg(rtol, "rtol")
     if not (math.isfinite(rtol) and 0 < rtol < 1):
-        raise EmaError(f"--rtol must be a number in (0, 1), got {rtol}")
-    try:
-        lo, hi = (float(x) for x in range)
-    except (TypeError, ValueError):
-        raise EmaError(f"--range must be two numbers LO HI, got {range!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise EmaError(f"--range must be two finite numbers, got {lo} {hi}")
+        raise EmaError(f"rtol must be a number in (0, 1), got {rtol}")
+    if isinstance(range, str | bytes) or not hasattr(range, "__len__") or len(range) != 2:
+        raise EmaError(f"range must be two numbers (LO, HI), got {range!r}")
+    lo, hi = (float(number_arg(x, "range", optional=False)) for x in range)
     if not lo < hi:
-        raise EmaError(f"--range LO HI must have LO < HI, got {lo:g} {hi:g}")
+        raise EmaError(f"range (LO, HI) must have LO < HI, got {lo:g} {hi:g}")
     if log and lo <= 0:
-        raise EmaError(f"--range LO must be > 0 on a logarithmic grid (or use --linear), "
+        raise EmaError(f"range LO must be > 0 on a logarithmic grid (or a linear one), "
                        f"got {lo:g}")
     if lo < 0:
-        raise EmaError(f"--range LO must be >= 0 (a magnitude), got {lo:g}")
+        raise EmaError(f"range LO must be >= 0 (a magnitude), got {lo:g}")
     pl = lookup(vary)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
@@ -175,7 +174,7 @@ def threshold(
     both = sorted(set(nonlinearity_updates(vary, hi, resolve(), cfg.friction_reading))
                   & set(cfg.plant))
     if both:
-        raise EmaError(f"--vary {vary} and plant.{both[0]} set the same model parameter; "
+        raise EmaError(f"vary {vary} and plant.{both[0]} set the same model parameter; "
                        "remove plant." + both[0])
     signal = input_signal(cfg.input, base_dir(config), cfg.load)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != vary}

@@ -246,14 +246,28 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     if config is None:
         raise EmaError("tune needs a tuning config (a YAML file such as configs/tune.yaml)")
     if method is not None and method not in ("ga", "de"):
-        raise EmaError(f"--method must be ga or de, got {method!r}")
-    for value, name, cap in ((runs, "--runs", MAX_RUNS), (budget, "--budget", MAX_BUDGET)):
+        raise EmaError(f"method must be ga or de, got {method!r}")
+    for value, name, cap in ((runs, "runs", MAX_RUNS), (budget, "budget", MAX_BUDGET)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)
                                   or not 1 <= value <= cap):
             raise EmaError(f"{name} must be an integer in [1, {cap}], got {value!r}")
+    from ema_cli.api._inputs import callable_arg
+
+    callable_arg(progress, "progress")
+    callable_arg(log, "log")
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, TuneConfig)
     scenarios, actuator_doc = build_scenarios(cfg, base_dir(config))
+    from ema_cli.limits import check_steps
+    from ema_cli.tune.run import evaluations_for
+
+    o = cfg.optimiser
+    n_evals = (runs or o.runs) * evaluations_for(method or o.method, budget or o.budget, o.pop,
+                                                 len(cfg.variables), o.polish, o.local)
+    steps = cfg.simulation.duration_s / cfg.simulation.dt_s
+    check_steps(n_evals * len(scenarios) * steps,
+                f"tune: {n_evals:,} evaluations x {len(scenarios)} scenarios x {steps:.3g} steps",
+                "lower budget or runs, shorten simulation.duration_s or raise simulation.dt_s")
     if log is not None:
         o = cfg.optimiser
         n_runs = runs or o.runs
@@ -281,13 +295,15 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
 
 
 def infeasible_message(res: TuneResult) -> str:
-    """One line: no candidate met every constraint, and which the best one violates most."""
+    """One line: no candidate met every constraint, and which the best one violates most (the
+    largest violation relative to its limit, as the tuning scores it; NaN counts as the
+    largest)."""
     ev = res.outcome.after
     worst = ""
     df = res.constraints_frame()
     bad = df[~df["met"]]
     if len(bad):
-        r = bad.iloc[0]
+        r = bad.loc[relative_violation(bad).idxmax()]
         bound = f"<= {r['max']:g}" if r["max"] is not None and not math.isnan(
             r["max"]) else f">= {r['min']:g}"
         worst = (f"; the best violates scenarios.{r['scenario']} {r['constraint']} "
@@ -295,5 +311,23 @@ def infeasible_message(res: TuneResult) -> str:
     elif ev.diverged.any():
         worst = "; the best diverges"
     return (f"no candidate met every constraint in {int(res.outcome.timings['evaluations'])} "
-            f"evaluations{worst}: relax the constraints, widen the bounds or raise --budget "
+            f"evaluations{worst}: relax the constraints, widen the bounds or raise budget "
             "(infeasible constraints)")
+
+
+def relative_violation(df: pd.DataFrame) -> pd.Series:
+    """Per row of :meth:`TuneResult.constraints_frame`: how far the tuned value lies outside
+    its limit, relative to the limit (``(v - max)/|max|``, ``(min - v)/|min|``; inf for NaN)."""
+    import numpy as np
+
+    def one(r: Any) -> float:
+        v = r["after"]
+        if v != v:  # NaN: not measured, the worst
+            return math.inf
+        out = 0.0
+        for bound, sign in ((r["max"], 1.0), (r["min"], -1.0)):
+            if bound is not None and bound == bound:
+                out += max(sign * (v - bound), 0.0) / (abs(bound) or 1.0)
+        return out
+
+    return df.apply(one, axis=1).astype(np.float64)

@@ -37,6 +37,25 @@ def printable(text: str) -> str:
     return re.sub(r"[\x00-\x08\x0b-\x1f\x7f]", "?", " ".join(text.split("\n")))
 
 
+def as_options(call: Callable[[], Any], *, anywhere: bool = True, **options: str) -> Any:
+    """Run an API ``call``; its EmaError names arguments (``f_min_hz``), re-raised naming the
+    command's options instead (``--f-min``): API errors name arguments, CLI errors options.
+    ``anywhere=False``: only the argument the message starts with (a word such as ``metric``
+    may also name something else further on)."""
+    import re
+
+    try:
+        return call()
+    except EmaError as exc:
+        text = exc.message
+        for arg, opt in options.items():
+            pattern = rf"(?<![\w.-]){re.escape(arg)}(?![\w])"
+            text = re.sub(pattern if anywhere else "^" + pattern, opt, text)
+        if text == exc.message:
+            raise
+        raise EmaError(text) from None
+
+
 def handle_errors(fn: F) -> F:
     """Turn EmaError (and Ctrl-C) into one clear message and an exit code, never a traceback.
 

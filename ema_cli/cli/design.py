@@ -10,7 +10,14 @@ from typing import Annotated
 
 import typer
 
-from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.cli.common import (
+    as_options,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
 from ema_cli.progress import report as report_stage
 
 
@@ -51,9 +58,13 @@ def design_cmd(
         raise EmaError(f"config '{config}' is not a file (a design config, e.g. "
                        "configs/design.yaml)")
     check_output(out, "design")
-    res = design(log, config, parse_assignments(set_, "--set"), tune_config=tune_config,
-                 spec=spec, budget=budget, stage=report_stage,
-                 tune_log=lambda text: err_console.print(text, highlight=False))
+    pairs = parse_assignments(set_, "--set")
+    res = as_options(lambda: design(log, config, pairs, tune_config=tune_config, spec=spec,
+                                    budget=budget, stage=report_stage,
+                                    tune_log=lambda text: err_console.print(text,
+                                                                            highlight=False)),
+                     anywhere=False, tune_config="--tune-config", spec="--spec",
+                     budget="--budget")
     report_stage("writing files and figures")
     folder = res.save(out)
     js = res.to_json()
@@ -84,12 +95,12 @@ def design_cmd(
     for c in cases:
         sides = "".join({"low": "-", "high": "+"}[c["sides"][n]] for n in names) if c[
             "sides"] else "estimate"
-        failed = [t for t, ok in c["tests"].items() if not ok]
-        crows.append([c["case"], sides, "PASS" if c["passed"] else "FAIL",
-                      ", ".join(failed) or "-"])
+        failed = [t if r == "FAIL" else f"{t} (inconclusive)"
+                  for t, r in c["test_results"].items() if r != "PASS"]
+        crows.append([c["case"], sides, c["verdict"], ", ".join(failed) or "-"])
     print_table(f"acceptance ({len(js['acceptance']['tests'])} tests per case)",
-                ["case", " ".join(names), "verdict", "failed tests"], crows,
-                justify=["left", "left", "left", "left"], wrap=["failed tests"],
+                ["case", " ".join(names), "verdict", "tests not passed"], crows,
+                justify=["left", "left", "left", "left"], wrap=["tests not passed"],
                 caption="corners: - low / + high end of each 95 % interval")
     for n in js["notes"]:
         err_console.print(textwrap.fill(f"note: {n}", width(), subsequent_indent="  "),

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import (
+    as_options,
     check_number,
     console,
     handle_errors,
@@ -64,8 +65,10 @@ def freqresp_cmd(
     check_number(f_max, "--f-max", low=0.0, low_open=True)
     check_number(n, "--n", low=2, high=2000)
     check_output(out, "freqresp")
-    res = freqresp(config, parse_assignments(set_, "--set"), amplitudes_deg=amps,
-                   f_min_hz=f_min, f_max_hz=f_max, n=n, nl=dict(parse_assignments(nl, "--nl")))
+    pairs, nls = parse_assignments(set_, "--set"), dict(parse_assignments(nl, "--nl"))
+    res = as_options(lambda: freqresp(config, pairs, amplitudes_deg=amps, f_min_hz=f_min,
+                                      f_max_hz=f_max, n=n, nl=nls),
+                     f_min_hz="--f-min", f_max_hz="--f-max", amplitudes_deg="--amplitudes")
     report_stage("writing files and figures")
     folder = res.save(out)
     summary = res.summary

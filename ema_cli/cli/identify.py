@@ -204,6 +204,17 @@ def identify_cmd(
 
     check_output(out, "identify")
 
+    for value, option in ((k_range, "--k-range"), (alpha_range, "--alpha-range"),
+                          (c_range, "--c-range")):
+        for v in value or ():
+            check_number(v, option, low=0.0)
+    check_number(noise, "--noise", low=0.0)
+    check_number(c, "--c", low=0.0)
+    check_number(pc, "--pc", low=0.0, high=1.0)
+    check_number(pm, "--pm", low=0.0, high=1.0)
+    from ema_cli.cli.sweep import check_jobs
+
+    n_jobs = check_jobs(n_jobs, "--n-jobs")  # capped at the cores available, with a note
     pairs = torque_pairs({
         "k_range": k_range, "alpha_range": alpha_range, "c_range": c_range, "method": method,
         "runs": runs, "n_jobs": n_jobs, "data": str(data) if data is not None else None,

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ema_cli.cli.common import check_number, console, err_console, parse_assignments
+from ema_cli.cli.common import as_options, check_number, console, err_console, parse_assignments
 from ema_cli.errors import EmaError
 from ema_cli.progress import report as report_stage
 
@@ -198,7 +198,9 @@ def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | 
     from ema_cli.api.identify_logs import identify_closed_loop
 
     report_stage("reading the log, loading the kernel")
-    ident = identify_closed_loop(config, pairs)
+    ident = as_options(lambda: identify_closed_loop(config, pairs),
+                       **{"with window (T0, T1) [s]": "with --window T0,T1",
+                          "data: out of memory": "--data: out of memory"})
     fit = ident.result
     report_stage("writing files and figures")
     folder = ident.save(out)

@@ -37,7 +37,7 @@ def reproduce_cmd(
     from ema_cli.cli.output import print_table
     from ema_cli.units import fmt_num
 
-    check_jobs(n_jobs, "--n-jobs")
+    n_jobs = check_jobs(n_jobs, "--n-jobs")
     overrides = parse_assignments(set_, "--set")
     run = reproduce(experiment, overrides, out=out, n_jobs=n_jobs, progress=is_interactive(),
                     log=lambda m: err_console.print(f"[dim]{m}[/]"))

@@ -17,7 +17,6 @@ from ema_cli.cli.common import (
 )
 from ema_cli.errors import EmaError
 
-MAX_WORKERS = 4096  # --n-jobs above this is refused
 TOP_FACTORS = 3  # factors named per input and metric in the closing lines
 
 
@@ -55,10 +54,12 @@ def sensitivity_cmd(
     if method is not None and method not in ("morris", "sobol"):
         raise EmaError(f"--method must be morris or sobol, got {method!r}")
     check_number(n, "--n", low=1)
-    if n_jobs is not None and n_jobs != -1:
-        check_number(n_jobs, "--n-jobs (-1: all cores)", low=1, high=MAX_WORKERS)
-    if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
-        raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
+    from ema_cli.cli.sweep import check_jobs
+    from ema_cli.limits import BACKENDS
+
+    n_jobs = check_jobs(n_jobs, "--n-jobs", scheduler)
+    if backend is not None and backend not in BACKENDS:
+        raise EmaError(f"--backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
     overrides = parse_assignments(set_, "--set")
     run = sensitivity(config, overrides, method=method, n=n, n_jobs=n_jobs, backend=backend,
                       scheduler=scheduler, progress=progress, out=out, write=True,

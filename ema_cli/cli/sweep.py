@@ -24,13 +24,17 @@ if TYPE_CHECKING:
 MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)
 MAX_TABLE_METRICS = 4  # metric columns of the terminal summary table
 MAX_SHOW_JOBS = 50  # jobs listed by `ema show` unless --all
-MAX_WORKERS = 4096  # --n-jobs above this is refused
+def check_jobs(n_jobs: int | None, option: str, scheduler: str | None = None) -> int | None:
+    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS -> the count to use, capped at the
+    cores available (with a note) unless a cluster ``scheduler`` is given."""
+    from ema_cli.limits import MAX_WORKERS, cap_workers
 
-
-def check_jobs(n_jobs: int | None, option: str) -> None:
-    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS."""
     if n_jobs is not None and n_jobs != -1:
         check_number(n_jobs, option + " (-1: all cores)", low=1, high=MAX_WORKERS)
+    n_jobs, note = cap_workers(n_jobs, option, cluster=scheduler is not None)
+    if note:
+        err_console.print(f"note: {note}", highlight=False)
+    return n_jobs
 
 ConfigArg = Annotated[Path, typer.Argument(help="YAML study config, e.g. configs/deadzone2.yaml.")]
 SetOpt = Annotated[list[str] | None, typer.Option(
@@ -105,10 +109,11 @@ def sweep_cmd(
     """Run a sweep: every job of CONFIG, in parallel, cached and resumable; writes metrics.csv,
     time series, figures, summary.md and manifest.json."""
     from ema_cli.api.study import sweep
+    from ema_cli.limits import BACKENDS
 
-    check_jobs(n_jobs, "--n-jobs")
-    if backend is not None and backend not in ("auto", "loky", "threads", "dask"):
-        raise EmaError(f"--backend must be one of auto, loky, threads, dask; got {backend!r}")
+    n_jobs = check_jobs(n_jobs, "--n-jobs", scheduler)
+    if backend is not None and backend not in BACKENDS:
+        raise EmaError(f"--backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
     overrides = parse_assignments(set_, "--set")
     run = sweep(config, overrides, n_jobs=n_jobs, backend=backend, force=force,
                 progress=progress, scheduler=scheduler, cache_dir=cache_dir, out=out,
@@ -194,6 +199,7 @@ def validate_cmd(
         from ema_cli.config.loader import load_config
 
         spec = load_config(config, overrides, AcceptanceSpec)
+        _check_actuator(spec.actuator, config)
         n_limits = sum(len(t.limits) for t in spec.tests.values())
         console.print(f"{config}: valid acceptance spec; {len(spec.tests)} tests, {n_limits} "
                       "limits")
@@ -203,15 +209,17 @@ def validate_cmd(
         from ema_cli.config.loader import load_config
 
         d = load_config(config, overrides, DesignConfig)
-        console.print(f"{config}: valid design config ({d.name}); the identify and tune "
-                      "sections are checked against their own schemas when `ema design` "
-                      "runs with the log")
+        _check_design_sections(d)
+        console.print(f"{config}: valid design config ({d.name}); its identify section "
+                      "checked against `ema identify --closed-loop`, its tune overrides "
+                      "against configs/tune.yaml (`ema design --tune-config` may name another)")
         return
     if kind == "tune":
         from ema_cli.config.loader import load_config
         from ema_cli.config.tune import TuneConfig
 
         t = load_config(config, overrides, TuneConfig)
+        _check_actuator(t.actuator, config)
         n_cons = len(t.constraints)
         console.print(f"{config}: valid tuning config; {len(t.scenarios)} scenarios, "
                       f"{len(t.variables)} variables ({', '.join(t.variables)}), {n_cons} "
@@ -240,6 +248,12 @@ def validate_cmd(
     from ema_cli.sweep.expand import check_size
 
     cfg, _ = _load(config, set_)
+    from ema_cli.config.loader import inert_input_warnings, input_signal
+
+    # the files it refers to (input and load profiles) are read and checked too
+    signal = input_signal(cfg.input, config.parent, cfg.load)
+    for w in inert_input_warnings(signal, cfg.simulation.duration_s):
+        err_console.print(f"warning: {w}", highlight=False)
     if not cfg.sweep.axes:  # a run config (`ema simulate`), or a study still without axes
         console.print(f"{config}: valid run config (no sweep axes: `ema simulate` runs it; "
                       "`ema sweep` needs sweep.axes)")
@@ -248,6 +262,40 @@ def validate_cmd(
     axes = "; ".join(f"{a.label} ({a.n_points()} values)" for a in cfg.sweep.axes)
     console.print(f"{config}: valid; {cfg.sweep.mode} over {axes} -> {n} jobs"
                   + (" (baseline included)" if cfg.sweep.baseline else ""))
+
+
+def _check_design_sections(d: Any) -> None:
+    """A design config's ``identify:`` settings against the closed-loop schema and its
+    ``tune:`` overrides on the bundled tuning config (an unknown key named, never dropped)."""
+    from ema_cli.api.design import DEFAULT_TUNE_CONFIG
+    from ema_cli.config.loader import dotted_pairs, load_config
+    from ema_cli.config.tune import TuneConfig
+    from ema_cli.identify.log_settings import ClosedLoopSettings
+
+    for key, check in (("identify", lambda: load_config(
+            {**d.identify, "name": d.identify.get("name", d.name)}, [], ClosedLoopSettings)),
+                       ("tune", lambda: load_config(DEFAULT_TUNE_CONFIG, dotted_pairs(d.tune),
+                                                    TuneConfig))):
+        try:
+            check()
+        except EmaError as exc:
+            raise EmaError(f"{key}: {exc.message}") from None
+
+
+def _check_actuator(actuator: Any, config: Path) -> None:
+    """The run config an acceptance spec or a tuning config names (``actuator.config``): it
+    exists, passes the run-config schema and its profiles can be read."""
+    from ema_cli.config.loader import input_signal, load_config
+    from ema_cli.config.study import StudyConfig
+
+    src, here = actuator.source(config.parent, "config")
+    if src is None:
+        return
+    try:
+        run = load_config(src, [], StudyConfig)
+        input_signal(run.input, here, run.load)
+    except EmaError as exc:
+        raise EmaError(f"actuator.config: {exc}") from None
 
 
 @handle_errors

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from ema_cli.cli.common import console, handle_errors, out_help, parse_assignments
+from ema_cli.cli.common import as_options, console, handle_errors, out_help, parse_assignments
 from ema_cli.cli.output import print_table
 from ema_cli.progress import report as report_stage
 from ema_cli.units import fmt_num
@@ -46,9 +46,13 @@ def threshold_cmd(
     from ema_cli.report.rundir import check_output
 
     check_output(out, "threshold")
-    res = threshold(config, vary, range_, metric=metric, limit=limit, require=require or (),
-                    direction=direction, log=not linear, rtol=rtol,
-                    overrides=parse_assignments(set_, "--set"))
+    pairs = parse_assignments(set_, "--set")
+    res = as_options(lambda: threshold(config, vary, range_, metric=metric, limit=limit,
+                                       require=require or (), direction=direction,
+                                       log=not linear, rtol=rtol, overrides=pairs),
+                     anywhere=False, vary="--vary", range="--range", metric="--metric",
+                     limit="--limit", require="--require", direction="--direction",
+                     rtol="--rtol")
     report_stage("writing files and figures")
     folder = res.save(out)
     r = res.result

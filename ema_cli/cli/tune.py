@@ -7,7 +7,14 @@ from typing import Annotated
 
 import typer
 
-from ema_cli.cli.common import console, err_console, handle_errors, out_help, parse_assignments
+from ema_cli.cli.common import (
+    as_options,
+    console,
+    err_console,
+    handle_errors,
+    out_help,
+    parse_assignments,
+)
 from ema_cli.progress import report as report_stage
 
 
@@ -49,9 +56,11 @@ def tune_cmd(
     def progress(run: int, done: int, total: int) -> None:
         report(f"run {run + 1}: evaluations", done, total)
 
-    res = tune(config, parse_assignments(set_, "--set"), method=method, runs=runs,
-               budget=budget, progress=progress,
-               log=lambda text: err_console.print(text, highlight=False))
+    pairs = parse_assignments(set_, "--set")
+    res = as_options(lambda: tune(config, pairs, method=method, runs=runs, budget=budget,
+                                  progress=progress,
+                                  log=lambda text: err_console.print(text, highlight=False)),
+                     method="--method", runs="--runs", budget="--budget")
     report_stage("writing files and figures")
     folder = res.save(out)
     o = res.outcome

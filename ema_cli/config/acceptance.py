@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
@@ -34,21 +34,11 @@ from ema_cli.config.run import KEY_MARK, Scalar
 from ema_cli.errors import EmaError
 from ema_cli.units import SI_UNIT, UNITS, units_of
 
-METRICS: dict[str, dict[str, str]] = {
-    "step": {"rise_time": "time", "overshoot": "percent", "settling_time": "time",
-             "steady_state_error": "angle", "peak_current": "current"},
-    "frequency_response": {"bandwidth": "frequency", "phase_lag": "angle",
-                           "peak_gain": "decibel"},
-    "margins": {"gain_margin": "decibel", "phase_margin": "angle"},
-    "threshold": {"threshold": "angle"},
-    "hysteresis": {"hysteresis": "angle", "free_play": "angle"},
-    "load_deflection": {"stiffness": "stiffness", "free_play": "angle"},
-    "dynamic_stiffness": {"dynamic_stiffness": "stiffness"},
-    "no_load_rate": {"rate": "rate"},
-}
-"""The metrics of each test kind and their dimensions."""
 MAX_TESTS = 50  # tests in one spec, at most [-]
 MAX_DURATION_S = 120.0  # simulated duration of one test run, at most [s]
+MIN_STEPS = 10  # a duration, a quarter period or a branch spans this many time steps, at least [-]
+SINE_PERIOD_STEPS = 88  # steps in one period of a sine test, at least (analysis.freqresp) [-]
+MARGINS_F_MIN_HZ = 1e-3  # lowest frequency of the margins' search grid [Hz]
 
 
 class Limit(Strict):
@@ -94,11 +84,20 @@ def _at(key: str, message: str) -> ValueError:
     return ValueError(f"{KEY_MARK}{key}{KEY_MARK}{message}")
 
 
+def _sine_seconds(f_hz: float) -> float:
+    """Simulated seconds of one sinestream frequency at ``f_hz``, at most (analysis.freqresp:
+    max(3 periods, 0.3 s) of settling and 4 measured periods)."""
+    return max(3.0 / f_hz, 0.3 + 1.0 / f_hz) + 4.0 / f_hz
+
+
 def _article(word: str) -> str:
     return "an" if word[0] in "aeiou" else "a"
 
 
 class _Test(Strict):
+    METRICS: ClassVar[dict[str, str]] = {}
+    """The metrics of the kind and their dimensions (:data:`ema_cli.units.UNITS`)."""
+
     limits: dict[str, Limit] = Field(description="metric -> limit; at least one")
     overrides: dict[str, Any] = Field(
         default_factory=dict, alias="set",
@@ -108,7 +107,7 @@ class _Test(Strict):
     @model_validator(mode="after")
     def _limits(self) -> _Test:
         kind = self.test  # type: ignore[attr-defined]
-        known = METRICS[kind]
+        known = type(self).METRICS
         if not self.limits:
             raise _at("limits", f"a {kind} test needs at least one limit; its metrics: "
                                 f"{', '.join(known)}")
@@ -123,9 +122,24 @@ class _Test(Strict):
                           f"{_article(dim)} {dim}; expected one of {', '.join(units_of(dim))}")
         return self
 
+    def spans(self) -> list[tuple[str, float, int]]:
+        """(key, time span [s], time steps it must hold at least) of every setting that
+        sets how finely the test samples time: a spec whose span holds fewer steps of the
+        actuator's ``dt`` cannot measure and is refused (:func:`check_measurable`)."""
+        return []
+
+    def sim_seconds(self) -> float:
+        """The simulated time of the test (cases x seconds, summed over its kernel calls) [s],
+        at most: with ``dt`` it gives the test's integration steps before it runs."""
+        return 0.0
+
 
 class StepTest(_Test):
     """A step of the position reference; the kernel's step metrics."""
+
+    METRICS: ClassVar[dict[str, str]] = {
+        "rise_time": "time", "overshoot": "percent", "settling_time": "time",
+        "steady_state_error": "angle", "peak_current": "current"}
 
     test: Literal["step"]
     amplitude_deg: FiniteFloat = Field(description="step size [deg], load side (not 0)")
@@ -138,9 +152,18 @@ class StepTest(_Test):
             raise ValueError("a step needs a nonzero amplitude [deg]")
         return v
 
+    def sim_seconds(self) -> float:
+        return self.duration_s
+
+    def spans(self) -> list[tuple[str, float, int]]:
+        return [("duration_s", self.duration_s, MIN_STEPS)]
+
 
 class FrequencyResponseTest(_Test):
     """A sinestream at each amplitude: -3 dB bandwidth, phase lag at a frequency, peak gain."""
+
+    METRICS: ClassVar[dict[str, str]] = {"bandwidth": "frequency", "phase_lag": "angle",
+                                         "peak_gain": "decibel"}
 
     test: Literal["frequency_response"]
     amplitudes_deg: list[PositiveFloat] = Field(min_length=1, max_length=10)
@@ -162,16 +185,29 @@ class FrequencyResponseTest(_Test):
                              f"f_max_hz ({self.f_min_hz}..{self.f_max_hz})")
         return self
 
+    def sim_seconds(self) -> float:
+        return len(self.amplitudes_deg) * (self.n + 1) * _sine_seconds(self.f_min_hz)
+
+    def spans(self) -> list[tuple[str, float, int]]:
+        return [("f_max_hz", 1.0 / self.f_max_hz, SINE_PERIOD_STEPS)]
+
 
 class MarginsTest(_Test):
     """Gain and phase margins of the linear limit, each loop broken in turn."""
 
+    METRICS: ClassVar[dict[str, str]] = {"gain_margin": "decibel", "phase_margin": "angle"}
+
     test: Literal["margins"]
     loops: list[Literal["position", "speed"]] = Field(["position", "speed"], min_length=1)
+    f_max_hz: PositiveFloat = Field(
+        1e5, gt=10 * MARGINS_F_MIN_HZ, le=1e7,
+        description="highest frequency searched for crossovers [Hz] (from 1e-3 Hz)")
 
 
 class ThresholdTest(_Test):
     """The smallest step the load follows to ``fraction`` of its size within ``within_s``."""
+
+    METRICS: ClassVar[dict[str, str]] = {"threshold": "angle"}
 
     test: Literal["threshold"]
     fraction: PositiveFloat = Field(0.5, le=1.0, description="share of the step to reach")
@@ -187,9 +223,34 @@ class ThresholdTest(_Test):
             raise ValueError(f"search_deg needs LO < HI, got {list(v)}")
         return v
 
+    @model_validator(mode="after")
+    def _decidable(self) -> ThresholdTest:
+        lim = self.limits.get("threshold")
+        if lim is None or lim.dimension != "angle":
+            return self
+        lo, hi = lim.si()
+        floor, ceiling = (math.radians(v) for v in self.search_deg)
+        if floor > hi:
+            raise _at("search_deg", f"the search floor {self.search_deg[0]:g} deg is above the "
+                                    f"limit (max {lim.max:g} {lim.unit}): every outcome would "
+                                    "be at or above the floor; lower search_deg")
+        if ceiling < lo:
+            raise _at("search_deg", f"the search ceiling {self.search_deg[1]:g} deg is below "
+                                    f"the limit (min {lim.min:g} {lim.unit}): every outcome "
+                                    "would be at or below the ceiling; raise search_deg")
+        return self
+
+    def sim_seconds(self) -> float:
+        return 8 * 13 * self.within_s  # 8 steps a batch, the first batch and 12 rounds at most
+
+    def spans(self) -> list[tuple[str, float, int]]:
+        return [("within_s", self.within_s, MIN_STEPS)]
+
 
 class HysteresisTest(_Test):
     """A slow triangle command (0 -> +A -> -A -> 0 per period), measured on the last cycle."""
+
+    METRICS: ClassVar[dict[str, str]] = {"hysteresis": "angle", "free_play": "angle"}
 
     test: Literal["hysteresis"]
     amplitude_deg: PositiveFloat = 2.0
@@ -203,9 +264,17 @@ class HysteresisTest(_Test):
                              f"than {MAX_DURATION_S:g} s")
         return self
 
+    def sim_seconds(self) -> float:
+        return self.period_s * self.cycles
+
+    def spans(self) -> list[tuple[str, float, int]]:
+        return [("period_s", self.period_s / 4, MIN_STEPS)]  # a quarter period: one ramp
+
 
 class LoadDeflectionTest(_Test):
     """Motor locked; a slow load-torque triangle 0 -> +T -> -T -> 0 over ``period_s``."""
+
+    METRICS: ClassVar[dict[str, str]] = {"stiffness": "stiffness", "free_play": "angle"}
 
     test: Literal["load_deflection"]
     torque_nm: PositiveFloat = Field(description="peak load torque [N*m]")
@@ -213,9 +282,17 @@ class LoadDeflectionTest(_Test):
     fit_fraction: PositiveFloat = Field(
         0.25, lt=1.0, description="the lines are fitted where |T| >= this share of the peak")
 
+    def sim_seconds(self) -> float:
+        return self.period_s
+
+    def spans(self) -> list[tuple[str, float, int]]:
+        return [("period_s", self.period_s / 4, MIN_STEPS)]  # a quarter period: one ramp
+
 
 class DynamicStiffnessTest(_Test):
     """A sine load torque, closed loop: min over frequency of |T / theta_L|."""
+
+    METRICS: ClassVar[dict[str, str]] = {"dynamic_stiffness": "stiffness"}
 
     test: Literal["dynamic_stiffness"]
     amplitude_nm: PositiveFloat = 1.0
@@ -230,19 +307,38 @@ class DynamicStiffnessTest(_Test):
                              f"({self.f_max_hz})")
         return self
 
+    def sim_seconds(self) -> float:
+        return (self.n + 16) * _sine_seconds(self.f_min_hz)  # the grid and 2 x 8 refinements
+
+    def spans(self) -> list[tuple[str, float, int]]:
+        return [("f_max_hz", 1.0 / self.f_max_hz, SINE_PERIOD_STEPS)]
+
 
 class NoLoadRateTest(_Test):
     """The peak load rate on a large step, no load."""
+
+    METRICS: ClassVar[dict[str, str]] = {"rate": "rate"}
 
     test: Literal["no_load_rate"]
     amplitude_deg: PositiveFloat = 40.0
     duration_s: PositiveFloat = Field(1.0, le=MAX_DURATION_S)
 
+    def sim_seconds(self) -> float:
+        return self.duration_s
 
-_KINDS = {"step": StepTest, "frequency_response": FrequencyResponseTest, "margins": MarginsTest,
+    def spans(self) -> list[tuple[str, float, int]]:
+        return [("duration_s", self.duration_s, MIN_STEPS)]
+
+
+_KINDS: dict[str, type[_Test]] = {
+    "step": StepTest, "frequency_response": FrequencyResponseTest, "margins": MarginsTest,
           "threshold": ThresholdTest, "hysteresis": HysteresisTest,
           "load_deflection": LoadDeflectionTest, "dynamic_stiffness": DynamicStiffnessTest,
           "no_load_rate": NoLoadRateTest}
+
+
+METRICS: dict[str, dict[str, str]] = {k: dict(cls.METRICS) for k, cls in _KINDS.items()}
+"""The metrics of each test kind and their dimensions (from each schema's ``METRICS``)."""
 
 
 def _tag(v: Any) -> str:
@@ -303,7 +399,7 @@ class AcceptanceSpec(Strict):
                 if "test" not in entry:
                     raise _at(f"{name}.test", f"missing: the test kind, one of "
                                               f"{', '.join(METRICS)}")
-                if entry["test"] not in METRICS:
+                if not isinstance(entry["test"], str) or entry["test"] not in METRICS:
                     raise _at(f"{name}.test", f"unknown test {entry['test']!r}; expected one "
                                               f"of {', '.join(METRICS)}")
         return v
@@ -313,3 +409,20 @@ class AcceptanceSpec(Strict):
 
 
 TEST_KINDS = tuple(METRICS)
+
+
+def check_measurable(name: str, test: _Test, dt: float) -> None:
+    """Refuse a test that cannot measure with the time step ``dt`` [s] of its actuator: a
+    duration or period spanning fewer time steps than it needs (EmaError naming the key)."""
+    from ema_cli.limits import check_steps
+
+    check_steps(test.sim_seconds() / dt, f"tests.{name} ({test.test})",
+                f"the actuator's dt_s = {dt:g} s is too fine for it: raise simulation.dt_s "
+                "(of the actuator, or in the test's set:), or shorten the test")
+    for key, span, steps in test.spans():
+        if span < steps * dt * (1 - 1e-9):
+            value = getattr(test, key)
+            raise EmaError(f"tests.{name}.{key}: {value:g} gives {span / dt:.3g} time steps of "
+                           f"the actuator's dt_s = {dt:g} s where the {test.test} test needs "
+                           f"{steps} at least; {'lower' if key.startswith('f_') else 'lengthen'}"
+                           f" {key} (or reduce simulation.dt_s)")

@@ -398,6 +398,23 @@ def input_signal(cfg_input: Any, base_dir: Path | None = None,
     )
 
 
+def inert_input_warnings(signal: InputSignal, duration: float) -> list[str]:
+    """Warnings for inputs that do nothing within a run of ``duration`` [s]: a reference that
+    starts at or after the end, a profile (reference or load torque) whose first row is at or
+    after the end."""
+    out = []
+    if signal.kind != "csv" and signal.start >= duration:
+        out.append(f"input.start_s = {signal.start:g} s is not before the end of the run "
+                   f"(simulation.duration_s = {duration:g} s): the reference never moves")
+    for table, path, key in ((signal.table, signal.path, "input.path"),
+                             (signal.load_table, signal.load_path, "load.profile")):
+        if table is not None and len(table[0]) and table[0][0] >= duration:
+            out.append(f"{key}: the profile '{path}' starts at {table[0][0]:g} s, at or after "
+                       f"the end of the run (simulation.duration_s = {duration:g} s): it is "
+                       "never applied")
+    return out
+
+
 def resolve_run(cfg: RunConfig, base_dir: Path | None = None) -> ResolvedRun:
     """A validated RunConfig -> ResolvedRun (SI)."""
     params = resolve_params(cfg.plant_overrides(), cfg.nonlinearities, cfg.friction_reading)

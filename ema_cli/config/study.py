@@ -23,7 +23,8 @@ from ema_cli.sim.tables import METRIC_BY_EDGE
 
 MAX_JOBS_DEFAULT = 100_000  # a sweep expanding past this many jobs is refused [jobs]
 MAX_JOBS_CAP = 1_000_000  # the largest sweep.max_jobs accepted [jobs]
-MAX_WORKERS = 4096  # the most parallel workers (parallel.n_jobs) [workers]
+from ema_cli.limits import MAX_WORKERS  # noqa: E402 - the most parallel workers [workers]
+
 MAX_CHUNK = 1_000_000  # the largest parallel.chunk_size [jobs]
 MAX_AXIS_POINTS = 1_000_000  # the most points one linspace/logspace may ask for [points]
 MAX_CURVES_DEFAULT = 8  # the most curves drawn in one overlay figure [curves]

@@ -234,7 +234,7 @@ class TuneConfig(Strict):
     variables: dict[str, Variable] = Field(min_length=1, max_length=MAX_VARIABLES)
     cost: CostConfig = Field(default_factory=CostConfig)
     constraints: dict[str, Constraint] = Field(
-        default_factory=lambda: dict(DEFAULT_CONSTRAINTS),
+        default_factory=dict, validate_default=True,  # the defaults are validated as well
         description="name -> limit (min/max with unit) or off; defaults: gain_margin >= 6 dB, "
                     "phase_margin >= 45 deg")
     optimiser: OptimiserConfig = Field(default_factory=OptimiserConfig)

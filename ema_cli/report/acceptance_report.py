@@ -34,7 +34,7 @@ def _limit_line(ax: Any, limit: Any, unit: str, horizontal: bool = True) -> None
                                                        label=f"limit ({word}) {x:.4g} {unit}")
 
 
-def _step(run: Any, test: Any, title: str) -> Figure:
+def figure_step(run: Any, test: Any, title: str) -> Figure:
     d = run.data
     fig, ax = subplots(1, 1, figsize=(9, 5))
     ax.plot(d["t"], d["ref"] / DEG, "k--", lw=1.2, label="command")
@@ -59,7 +59,7 @@ class _Bode:
         return [p for p in self.points if p.amplitude_deg == a]
 
 
-def _freq(run: Any, test: Any, title: str) -> Figure:
+def figure_frequency_response(run: Any, test: Any, title: str) -> Figure:
     from ema_cli.report.freqresp_report import bode_figure
 
     fig = bode_figure(_Bode(run.data), f"{title}\n{run.name}: frequency response")
@@ -73,14 +73,14 @@ def _freq(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-def _margins(run: Any, test: Any, title: str) -> Figure:
+def figure_margins(run: Any, test: Any, title: str) -> Figure:
     from ema_cli.report.margins_report import margins_figure
 
     d = run.data
     return margins_figure(d["f_hz"], d["loops"], d["margins"], f"{title}\n{run.name}: margins")
 
 
-def _threshold(run: Any, test: Any, title: str) -> Figure:
+def figure_threshold(run: Any, test: Any, title: str) -> Figure:
     d = run.data
     amps = np.array(sorted(d["tried"]))
     frac = np.array([d["tried"][a] for a in amps])
@@ -102,7 +102,7 @@ def _threshold(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-def _hysteresis(run: Any, test: Any, title: str) -> Figure:
+def figure_hysteresis(run: Any, test: Any, title: str) -> Figure:
     d = run.data
     up, down = d["rising"], d["falling"]
     fig, axes = subplots(1, 2, figsize=(13, 5.5))
@@ -124,7 +124,7 @@ def _hysteresis(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-def _deflection(run: Any, test: Any, title: str) -> Figure:
+def figure_load_deflection(run: Any, test: Any, title: str) -> Figure:
     d = run.data
     fig, ax = subplots(1, 1, figsize=(9, 6))
     ax.plot(d["torque"], d["load"] / DEG, "C0", lw=3.5, alpha=0.45,
@@ -143,7 +143,7 @@ def _deflection(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-def _dynamic(run: Any, test: Any, title: str) -> Figure:
+def figure_dynamic_stiffness(run: Any, test: Any, title: str) -> Figure:
     d = run.data
     pts = d["points"]
     f = d["f_hz"]
@@ -161,7 +161,7 @@ def _dynamic(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-def _rate(run: Any, test: Any, title: str) -> Figure:
+def figure_no_load_rate(run: Any, test: Any, title: str) -> Figure:
     d = run.data
     fig, ax = subplots(1, 1, figsize=(9, 5))
     ax.plot(d["t"], d["rate"] / DEG, "C0", lw=1.3, label="load rate")
@@ -173,14 +173,11 @@ def _rate(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-FIGURES = {"step": _step, "frequency_response": _freq, "margins": _margins,
-           "threshold": _threshold, "hysteresis": _hysteresis, "load_deflection": _deflection,
-           "dynamic_stiffness": _dynamic, "no_load_rate": _rate}
-
-
 def test_figure(run: Any, test: Any, title: str) -> Figure:
-    """The figure of one test run."""
-    return FIGURES[run.kind](run, test, title)
+    """The figure of one test run (the kind's ``figure`` in :data:`acceptance.kinds.KINDS`)."""
+    from ema_cli.acceptance.kinds import KINDS
+
+    return globals()[KINDS[run.kind].figure](run, test, title)
 
 
 def fmt_value(v: float | None) -> str:
@@ -202,20 +199,55 @@ def fmt_limit(v: Any) -> str:
     return " and ".join(parts)
 
 
+def fmt_measured(v: Any) -> str:
+    """A verdict's value without its unit: the number when measured, else the bound it is
+    known by ("> 2", "<= 0.0001"; "not measured" when nothing is known)."""
+    if v.measured:
+        return fmt_value(v.value)
+    lo, hi = v.lower, v.upper
+    if math.isfinite(lo) and lo > 0 and not math.isfinite(hi):
+        return f"> {fmt_value(lo)}"
+    if math.isfinite(hi) and not (math.isfinite(lo) and lo > 0):
+        return f"<= {fmt_value(hi)}"
+    if math.isfinite(lo) and math.isfinite(hi) and lo > 0:
+        return f"{fmt_value(lo)}..{fmt_value(hi)}"
+    return "not measured"
+
+
+RESULT_MD = {"PASS": "PASS", "FAIL": "**FAIL**", "INCONCLUSIVE": "_INCONCLUSIVE_"}
+"""The result column of acceptance.md: FAIL bold, INCONCLUSIVE italic."""
+
+
+def verdict_line(res: Any) -> str:
+    """The overall verdict in words (FAIL if any limit fails, else INCONCLUSIVE if any value
+    could not be measured against its limit, else PASS)."""
+    n = len(res.verdicts)
+    if res.verdict == "PASS":
+        return "PASS: every limit met"
+    if res.verdict == "FAIL":
+        more = (f", {len(res.inconclusive)} inconclusive" if res.inconclusive else "")
+        return f"FAIL: {len(res.failed)} of {n} limits not met{more}"
+    return (f"INCONCLUSIVE: {len(res.inconclusive)} of {n} limits not measured inside the "
+            "test's range (see the reasons), none failed")
+
+
 def acceptance_markdown(res: Any) -> str:
-    """acceptance.md: the verdict, the PASS/FAIL table, notes and figures."""
-    n_fail = len(res.failed)
-    verdict = ("**PASS**: every limit met" if res.passed
-               else f"**FAIL**: {n_fail} of {len(res.verdicts)} limits not met")
+    """acceptance.md: the verdict, the PASS/FAIL/INCONCLUSIVE table, notes and figures."""
     lines = [f"# {res.title}", "", res.spec.description.strip(), "",
-             f"Spec: `{res.source}`. {verdict} ({len(res.runs)} tests, "
+             f"Spec: `{res.source}`. **{res.verdict}**{verdict_line(res)[len(res.verdict):]} "
+             f"({len(res.runs)} tests, "
              f"{res.wall_time_s:.1f} s).", "",
              "| test | metric | condition | value | limit | unit | result | note |",
              "|---|---|---|---|---|---|---|---|"]
     for v in res.verdicts:
-        lines.append(f"| {v.test} | {v.metric} | {v.condition} | {fmt_value(v.value)} | "
-                     f"{fmt_limit(v)} | {v.unit} | {'PASS' if v.passed else '**FAIL**'} | "
-                     f"{v.note} |")
+        note = "; ".join(x for x in (v.reason, v.note) if x).replace("|", "\\|")
+        lines.append(f"| {v.test} | {v.metric} | {v.condition} | {fmt_measured(v)} | "
+                     f"{fmt_limit(v)} | {v.unit} | {RESULT_MD[v.result]} | {note} |")
+    lines += ["", "A value measured inside the test's range is PASS or FAIL against its limit. "
+              "Outside that range the test only bounds it (`> 2`: above 2): the row is PASS or "
+              "FAIL when the whole bound lies on one side of the limit, otherwise "
+              "INCONCLUSIVE with the setting that widens the range. Overall: FAIL if any row "
+              "fails, else INCONCLUSIVE if any row is, else PASS."]
     notes = [(r.name, n) for r in res.runs for n in r.notes]
     if notes:
         lines += ["", "Notes:", ""] + [f"- {name}: {n}" for name, n in notes]

@@ -63,9 +63,10 @@ def design_markdown(js: dict[str, Any]) -> str:
     for c in cases:
         vals = [md_cell(c["parameters"][n], 5) + ({"low": " (lo)", "high": " (hi)"}.get(
             c["sides"].get(n, ""), "")) for n in names]
-        tests = ["pass" if c["tests"].get(t) else "**FAIL**" for t in acc["tests"]]
+        md = {"PASS": "pass", "FAIL": "**FAIL**", "INCONCLUSIVE": "_inconclusive_"}
+        tests = [md[c["test_results"].get(t, "FAIL")] for t in acc["tests"]]
         lines.append("| " + " | ".join([c["case"], *vals, *tests,
-                                        "PASS" if c["passed"] else "**FAIL**"]) + " |")
+                                        md[c["verdict"]].upper()]) + " |")
     failed = [(c["case"], f) for c in cases for f in c["failed_limits"]]
     if failed:
         lines += ["", "Limits not met (value in the limit's unit; each case's acceptance.md "

@@ -123,7 +123,14 @@ def scenario_document(cfg: TuneConfig, name: str, actuator: Mapping[str, Any],
 def build_scenarios(cfg: TuneConfig, base_dir: Path | None
                     ) -> tuple[list[Scenario], dict[str, Any]]:
     """Resolve every scenario of ``cfg`` -> (scenarios, the actuator's run config document)."""
+    from ema_cli.config.study import StudyConfig
+
     src, act_dir = cfg.actuator.source(base_dir, "tuning config")
+    if src is not None:  # the schema of `ema simulate`: an unknown key is named, never dropped
+        try:
+            load_config(src, [], StudyConfig)
+        except EmaError as exc:
+            raise EmaError(f"actuator.config: {exc}") from None
     act_data: dict[str, Any] = read_yaml(src) if src is not None else {}
     try:
         from ema_cli.config.loader import apply_overrides

@@ -20,7 +20,7 @@ def test_a_passing_battery_writes_everything(tmp_path):
     out = tmp_path / "acc"
     r = runner.invoke(app, ["acceptance", SPEC, *QUICK, "--out", str(out)])
     assert r.exit_code == 0, r.output
-    assert "PASS: 4 tests" in r.output
+    assert "PASS: every limit met (4 tests" in r.output
     names = ["acceptance.md", "acceptance.csv", "spec.resolved.yaml", "manifest.json",
              "step-small.png", "margins.png", "load-deflection.png", "free-play.png"]
     for name in names:
@@ -28,8 +28,9 @@ def test_a_passing_battery_writes_everything(tmp_path):
     table = pd.read_csv(out / "acceptance.csv")
     assert set(table.test) == {"step-small", "margins", "load-deflection", "free-play"}
     assert table.passed.all()
-    assert {"test", "metric", "condition", "value", "min", "max", "unit", "passed",
-            "value_si", "si_unit"} <= set(table.columns)
+    assert {"test", "metric", "condition", "value", "min", "max", "unit", "result", "passed",
+            "measured", "lower", "upper", "value_si", "si_unit", "reason"} <= set(table.columns)
+    assert set(table.result) == {"PASS"}
     md = (out / "acceptance.md").read_text()
     assert "**PASS**" in md and md.count("| PASS |") == len(table)
     man = json.loads((out / "manifest.json").read_text())
@@ -44,11 +45,42 @@ def test_a_failing_limit_exits_1_and_says_which(tmp_path):
     r = runner.invoke(app, ["acceptance", SPEC, "--only", "load-deflection", "--set",
                             "actuator.plant.alpha=0.003", "--out", str(out)])
     assert r.exit_code == 1, r.output
-    assert "FAIL (1 of 2 limits not met)" in r.output
+    assert "FAIL: 1 of 2 limits not met" in r.output
     table = pd.read_csv(out / "acceptance.csv")
     row = table[table.metric == "free_play"].iloc[0]
     assert not row.passed and row.value == pytest.approx(0.3438, rel=0.01)
     assert "**FAIL**" in (out / "acceptance.md").read_text()
+
+
+def test_an_inconclusive_battery_exits_3_with_its_own_row_style(tmp_path):
+    # issue 22: margins searched up to 1 Hz hold no crossover: INCONCLUSIVE, never PASS/FAIL
+    out = tmp_path / "acc"
+    r = runner.invoke(app, ["acceptance", SPEC, "--only", "margins", "--only", "step-small",
+                            "--set", "tests.margins.f_max_hz=1", "--out", str(out)])
+    assert r.exit_code == 3, r.output
+    text = " ".join(r.output.split())
+    assert "INCONCLUSIVE: 4 of 8 limits not measured inside the test's range" in text
+    assert text.count("INCONCLUSIVE ") == 4  # one mark per row; the verdict line has a colon
+    assert "-> no gain crossover up to f_max_hz = 1 Hz" in text
+    table = pd.read_csv(out / "acceptance.csv")
+    assert (table.result == "INCONCLUSIVE").sum() == 4
+    assert not table.loc[table.result == "INCONCLUSIVE", "measured"].any()
+    assert table.loc[table.result == "INCONCLUSIVE", "reason"].str.endswith(
+        "widen f_max_hz").all()
+    md = (out / "acceptance.md").read_text()
+    assert "**INCONCLUSIVE**: 4 of 8" in md and md.count("| _INCONCLUSIVE_ |") == 4
+    rows = [ln for ln in md.splitlines() if ln.startswith("| margins |")]
+    # |L| in a reason is escaped: every row keeps its 8 cells
+    assert len(rows) == 4 and all(ln.replace("\\|", "").count("|") == 9 for ln in rows)
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["verdict"] == "INCONCLUSIVE" and man["exit_code"] == 3
+    # a FAIL outranks an INCONCLUSIVE: exit 1
+    r = runner.invoke(app, ["acceptance", SPEC, "--only", "margins", "--only", "step-small",
+                            "--set", "tests.margins.f_max_hz=1", "--set",
+                            "tests.step-small.limits.rise_time.max=1", "--out",
+                            str(tmp_path / "b")])
+    assert r.exit_code == 1, r.output
+    assert "FAIL: 1 of 8 limits not met, 4 inconclusive" in " ".join(r.output.split())
 
 
 @pytest.mark.parametrize(("text", "message"), [

@@ -263,11 +263,11 @@ def test_recording_can_be_turned_off(tmp_path):
     (lambda api: api.simulate(None, nl=[("deadzone2", 0.1)]), "nl: expected a mapping"),
     (lambda api: api.simulate(None, "plant.kL=5"), "overrides: expected a dict"),
     (lambda api: api.threshold(None, "deadzone2", (0.001, 0.01, 0.1), metric="ss_err_pos_deg",
-                               limit=0.1), "--range"),
+                               limit=0.1), "^range must be two numbers"),
     (lambda api: api.threshold(None, "deadzone2", 0.1, metric="ss_err_pos_deg", limit=0.1),
-     "--range"),
+     "^range"),
     (lambda api: api.threshold(None, "deadzone2", (0.001, 0.1), metric="ss_err_pos_deg",
-                               limit="abc"), "--limit must be a number"),
+                               limit="abc"), "^limit must be a finite number"),
 ])
 def test_the_api_answers_bad_input_with_ema_errors(call, needle):
     from ema_cli import api

@@ -87,6 +87,11 @@ def test_verdict_rules():
     # no PASS on an unconfirmed fit, and no verdict without a case
     assert design_verdict(["not confirmed"], [True, True]) == "INCONCLUSIVE"
     assert design_verdict([], []) == "INCONCLUSIVE"
+    # issue 22: an acceptance case INCONCLUSIVE makes the design INCONCLUSIVE (exit 3), a
+    # FAIL outranks it
+    assert design_verdict([], ["PASS", "INCONCLUSIVE"]) == "INCONCLUSIVE"
+    assert design_verdict([], ["INCONCLUSIVE", "FAIL"]) == "FAIL"
+    assert design_verdict(["not confirmed"], ["FAIL"]) == "INCONCLUSIVE"
     assert EXIT_CODES == {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3}
 
 
@@ -124,7 +129,7 @@ def test_end_to_end_tiny_and_inconclusive(tmp_path, monkeypatch):
     assert r.exit_code == 3, r.output
     js = json.loads((out / "design.json").read_text())
     assert js["verdict"] == "INCONCLUSIVE" and js["exit_code"] == 3
-    assert "forced by the test" in js["inconclusive_because"][-1]
+    assert any("forced by the test" in why for why in js["inconclusive_because"])
     ident = js["identification"]["parameters"]
     # the contact law unstated: zeta_t and contact_tau free nuisance parameters, not corners
     assert list(ident) == ["kL", "alpha", "Fc", "sigma2", "zeta_t", "contact_tau"]

@@ -158,5 +158,5 @@ def test_threshold_brackets_the_limit(tmp_path):
     assert below <= 0.02 < above
     assert isinstance(th.plot(), Figure)
     assert (th.save(tmp_path / "th") / "threshold.json").is_file()
-    with pytest.raises(EmaError, match="--range"):
+    with pytest.raises(EmaError, match=r"^range \(LO, HI\) must have LO < HI"):
         api.threshold(cfg, "deadzone2", (0.5, 0.1), metric="ss_err_pos_deg", limit=0.02)

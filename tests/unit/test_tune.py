@@ -161,9 +161,9 @@ def test_scenario_problems_are_named():
     with pytest.raises(EmaError, match=r"scenarios\.s\.plant\.Kpp.*free variable"):
         tune({**BASE, "scenarios": {"s": {"input": {"kind": "step", "amplitude_deg": 0.1},
                                           "plant": {"Kpp": 30}}}})
-    with pytest.raises(EmaError, match="--budget"):
+    with pytest.raises(EmaError, match="^budget must be an integer"):
         tune(BASE, budget=0)
-    with pytest.raises(EmaError, match="--method"):
+    with pytest.raises(EmaError, match="^method must be ga or de"):
         tune(BASE, method="pso")
 
 
