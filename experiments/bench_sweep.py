@@ -48,9 +48,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ema_cli.api.study import run_sweep
 from ema_cli.config.loader import validate
 from ema_cli.config.study import StudyConfig
-from ema_cli.api.study import run_sweep
 from ema_cli.sim.tables import N_SIGNALS
 from ema_cli.sweep.execute import cpu_count
 from ema_cli.sweep.run import compute_sweep
