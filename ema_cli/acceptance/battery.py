@@ -32,11 +32,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from ema_cli.acceptance.measurement import Measurement, TestRun
 from ema_cli.config.acceptance import (
     METRICS,
     DynamicStiffnessTest,
@@ -62,47 +62,6 @@ REFINE_ROUNDS, REFINE_POINTS = 2, 8  # dynamic-stiffness refinement around the m
 PEAK_DC_DB = 0.5  # a peak gain at the lowest frequency above this is not the loop's DC level [dB]
 FOLLOW_SHARE = 0.5  # the hysteresis reads a loop when the load spans this share of 2A [-]
 FIT_RMS_SHARE = 0.02  # load deflection: the two-line fit's rms residual, at most, per span [-]
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """One value: the metric, a condition (``""``, ``"5 deg"``, ``"position loop"``), the value
-    in SI (``si_unit``), and a note (e.g. "at 36.5 Hz").
-
-    A value read inside the test's measurable range has ``reason == ""``. Otherwise the test
-    only bounds it: the true value lies in ``[lower, upper]`` (SI, one side infinite), ``value``
-    is the finite edge, and ``reason`` says why and which setting widens the range ("bandwidth
-    above the highest frequency measured, 2 Hz: widen f_max_hz"). :func:`judge` decides such a
-    bound only when the whole interval lies on one side of the limit."""
-
-    metric: str
-    condition: str
-    value: float
-    si_unit: str
-    note: str = ""
-    lower: float = -math.inf
-    upper: float = math.inf
-    reason: str = ""
-
-    @property
-    def measured(self) -> bool:
-        """Whether ``value`` was measured inside the measurable range."""
-        return not self.reason
-
-
-@dataclass
-class TestRun:
-    """The outcome of one test: measurements, data for its figure, wall time [s]."""
-
-    name: str
-    kind: str
-    measurements: list[Measurement]
-    data: dict[str, Any] = field(default_factory=dict)
-    wall_s: float = 0.0
-    notes: list[str] = field(default_factory=list)
-
-    def values(self, metric: str) -> list[Measurement]:
-        return [m for m in self.measurements if m.metric == metric]
 
 
 def _m(kind: str, metric: str, condition: str, value: float, note: str = "") -> Measurement:
@@ -514,85 +473,3 @@ def run_no_load_rate(name: str, test: NoLoadRateTest, params: Mapping[str, float
                    {"t": res.t_out, "rate": res.signal("omega_load"),
                     "amplitude_deg": test.amplitude_deg},
                    notes=["diverged"] if res.diverged[0] else [])
-
-
-PASS, FAIL, INCONCLUSIVE = "PASS", "FAIL", "INCONCLUSIVE"
-EXIT_CODES = {PASS: 0, FAIL: 1, INCONCLUSIVE: 3}
-"""``ema acceptance``'s exit code per overall verdict (2 stays bad usage or input)."""
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """One row of the verdict table: a measurement against its limit, in the limit's unit.
-
-    ``result`` is PASS or FAIL for a measured value; for a bound (``measured`` false, the
-    value known only to lie in ``[lower, upper]``) PASS or FAIL only when the whole interval
-    lies inside or outside the limit, else INCONCLUSIVE with ``reason`` naming the setting to
-    change. A value that is not a number (a diverged run) is INCONCLUSIVE. ``lower`` and
-    ``upper`` (in ``unit``) equal ``value`` for a measured value."""
-
-    test: str
-    kind: str
-    metric: str
-    condition: str
-    value: float
-    min: float | None
-    max: float | None
-    unit: str
-    result: str
-    measured: bool
-    lower: float
-    upper: float
-    value_si: float
-    si_unit: str
-    note: str
-    reason: str
-
-    @property
-    def passed(self) -> bool:
-        return self.result == PASS
-
-
-def judge(m: Measurement, lo: float, hi: float) -> tuple[str, str]:
-    """(PASS | FAIL | INCONCLUSIVE, reason) of ``m`` against the SI bounds ``lo``..``hi``."""
-    if m.measured:
-        if math.isnan(m.value):
-            return INCONCLUSIVE, "not measured (the simulation diverged: check the actuator " \
-                                 "or reduce simulation.dt_s)"
-        return (PASS if lo <= m.value <= hi else FAIL), ""
-    if lo <= m.lower and m.upper <= hi:
-        return PASS, ""
-    if m.upper < lo or m.lower > hi:
-        return FAIL, ""
-    return INCONCLUSIVE, m.reason
-
-
-def overall(results: list[str]) -> str:
-    """FAIL if any row fails, else INCONCLUSIVE if any is inconclusive, else PASS."""
-    if FAIL in results:
-        return FAIL
-    return INCONCLUSIVE if INCONCLUSIVE in results else PASS
-
-
-def verdicts(run: TestRun, limits: Mapping[str, Any]) -> list[Verdict]:
-    """Each measurement of ``run`` with a limit, compared in SI (:func:`judge`)."""
-    from ema_cli.units import from_si
-
-    out = []
-    for m in run.measurements:
-        lim = limits.get(m.metric)
-        if lim is None:
-            continue
-        lo, hi = lim.si()
-        result, reason = judge(m, lo, hi)
-        note = m.note
-        if not m.measured and result != INCONCLUSIVE:  # the bound, without the advice
-            bound = m.reason.rsplit(": ", 1)[0]
-            note = "; ".join(x for x in (note, f"decided on a bound: {bound}")
-                             if x and x not in bound)
-        lower, upper = (m.value, m.value) if m.measured else (m.lower, m.upper)
-        out.append(Verdict(run.name, run.kind, m.metric, m.condition,
-                           from_si(m.value, lim.unit), lim.min, lim.max, lim.unit, result,
-                           m.measured, from_si(lower, lim.unit), from_si(upper, lim.unit),
-                           m.value, m.si_unit, note, reason))
-    return out

@@ -14,7 +14,8 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
-    from ema_cli.acceptance.battery import TestRun, Verdict
+    from ema_cli.acceptance.battery import TestRun
+    from ema_cli.acceptance.verdict import Verdict
     from ema_cli.config.acceptance import AcceptanceSpec
 
 
@@ -35,14 +36,14 @@ class AcceptanceResult:
     def verdict(self) -> str:
         """FAIL if any limit fails on a measured value (or a bound wholly outside it), else
         INCONCLUSIVE if any value could not be measured against its limit, else PASS."""
-        from ema_cli.acceptance.battery import overall
+        from ema_cli.acceptance.verdict import overall
 
         return overall([v.result for v in self.verdicts])
 
     @property
     def exit_code(self) -> int:
         """``ema acceptance``'s exit code: 0 PASS, 1 FAIL, 3 INCONCLUSIVE."""
-        from ema_cli.acceptance.battery import EXIT_CODES
+        from ema_cli.acceptance.verdict import EXIT_CODES
 
         return EXIT_CODES[self.verdict]
 
@@ -134,8 +135,8 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     the named tests; ``progress(run)`` is called after each test."""
     import time
 
-    from ema_cli.acceptance.battery import verdicts
     from ema_cli.acceptance.kinds import run_test
+    from ema_cli.acceptance.verdict import verdicts
     from ema_cli.config.acceptance import AcceptanceSpec, check_measurable
     from ema_cli.config.loader import dotted_pairs, load_config, resolve_run
     from ema_cli.config.study import StudyConfig

@@ -76,7 +76,7 @@ class DesignCase:
 
     def test_results(self) -> dict[str, str]:
         """Per test of the spec: PASS, FAIL or INCONCLUSIVE (its rows, as the overall)."""
-        from ema_cli.acceptance.battery import overall
+        from ema_cli.acceptance.verdict import overall
 
         rows: dict[str, list[str]] = {}
         for v in self.result.verdicts:

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from ema_cli.acceptance.battery import verdicts
 from ema_cli.acceptance.kinds import run_test
+from ema_cli.acceptance.verdict import verdicts
 from ema_cli.analysis.linear import linear_model, margins
 from ema_cli.api import simulate
 from ema_cli.config.acceptance import AcceptanceSpec

@@ -10,16 +10,18 @@ import math
 import pytest
 
 from ema_cli.acceptance.battery import (
+    Measurement,
+)
+from ema_cli.acceptance.kinds import run_test
+from ema_cli.acceptance.verdict import (
     EXIT_CODES,
     FAIL,
     INCONCLUSIVE,
     PASS,
-    Measurement,
     judge,
     overall,
     verdicts,
 )
-from ema_cli.acceptance.kinds import run_test
 from ema_cli.api import acceptance
 from ema_cli.config.acceptance import AcceptanceSpec
 from ema_cli.config.loader import load_config

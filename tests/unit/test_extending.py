@@ -3,8 +3,6 @@ test kind is complete (a new command ends at test_cli_routes and test_result_con
 
 from __future__ import annotations
 
-import typing
-
 import numpy as np
 import pytest
 
@@ -42,23 +40,3 @@ def test_a_neutral_magnitude_changes_nothing(name, default_run):
     run = api.simulate(STEP, nl={name: NEUTRAL[name]})
     np.testing.assert_array_equal(run.signal("theta_load_deg"),
                                   default_run.signal("theta_load_deg"))
-
-
-def test_every_acceptance_kind_is_complete():
-    # Four registries in three files name the kinds today (issue 22 merges them into one;
-    # its completeness test then replaces this one): the settings schema, the metrics with
-    # their dimensions, the runner and the figure.
-    from ema_cli.acceptance.battery import RUNNERS
-    from ema_cli.config import acceptance as schema
-    from ema_cli.report.acceptance_report import FIGURES
-    from ema_cli.units import SI_UNIT
-
-    kinds = set(schema.METRICS)
-    assert set(schema._KINDS) == kinds, "config/acceptance.py: _KINDS vs METRICS"
-    assert set(RUNNERS) == kinds, "acceptance/battery.py: RUNNERS vs METRICS"
-    assert set(FIGURES) == kinds, "report/acceptance_report.py: FIGURES vs METRICS"
-    for kind, cls in schema._KINDS.items():
-        tag = typing.get_args(cls.model_fields["test"].annotation)
-        assert tag == (kind,), f"{cls.__name__}.test must be Literal[{kind!r}]"
-        for metric, dim in schema.METRICS[kind].items():
-            assert dim in SI_UNIT, f"{kind}.{metric}: dimension {dim!r} has no SI unit"

@@ -47,8 +47,8 @@ def _accept(*_: Any, **__: Any) -> Any:
 
 STUBS = ["ema_cli.analysis.freqresp.sinestream", "ema_cli.sim.runner.simulate_batch",
          "ema_cli.analysis.threshold.find_threshold", "ema_cli.tune.run.run_tuning",
-         "ema_cli.report.sweep_report.run_sweep",
-         "ema_cli.report.sensitivity_report.run_sensitivity",
+         "ema_cli.api.study.run_sweep",
+         "ema_cli.api.sensitivity.run_sensitivity",
          "ema_cli.acceptance.kinds.run_test"]
 
 # any Python value a caller might pass by mistake
