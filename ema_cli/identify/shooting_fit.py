@@ -291,7 +291,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     t0 = time.perf_counter()
     res, runner, seg_shift, runner_won = lengthen_both(res, lengthen, dt_search, iters,
                                                        report)
-    x_best_coarse = res.x.copy()
+    x_best_coarse, cost_coarse = res.x.copy(), res.cost
     x_runner = None if runner is None else runner.x.copy()
     timings["lengthen_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -339,10 +339,12 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     res.agree = 1 + int(x_runner is not None and
                         bool(np.all(np.abs(x_runner[prim] - x_best_coarse[prim]) <= hw)))
     if res.agree < 2:
+        seg = f"{res.lengths[-1]:g} s" if res.lengths else "the search's"
+        versus = ("" if runner is None else f"; on {seg} segments the estimate's cost is J = "
+                  f"{cost_coarse:.6g}, the runner-up's {runner.cost:.6g}")
         reasons.append(f"no other of the {n_fin} starts that ran to the end came within the "
-                       f"estimate's 95 % intervals (costs J = {res.cost:.6g} and "
-                       + ", ".join(f"{c:.6g}" for c in res.final_cost[1:]) + "): the search "
-                       "may have missed a better optimum (try more starts)"
+                       f"estimate's 95 % intervals{versus}: the search may have missed a "
+                       "better optimum (try more starts)"
                        + ("" if at_noise else f", and the fit is above the noise level "
                           f"(> {AT_NOISE_RATIO:g} x)"))
     first = res.sp.seg.first
