@@ -131,8 +131,9 @@ def test_end_to_end_tiny_and_inconclusive(tmp_path, monkeypatch):
     assert js["verdict"] == "INCONCLUSIVE" and js["exit_code"] == 3
     assert any("forced by the test" in why for why in js["inconclusive_because"])
     ident = js["identification"]["parameters"]
-    # the contact law unstated: zeta_t and contact_tau free nuisance parameters, not corners
-    assert list(ident) == ["kL", "alpha", "Fc", "sigma2", "zeta_t", "contact_tau"]
+    # the contact law unstated: zeta_t, contact_tau and the Hunt-Crossley share contact_hc
+    # free nuisance parameters, not corners
+    assert list(ident) == ["kL", "alpha", "Fc", "sigma2", "zeta_t", "contact_tau", "contact_hc"]
     cases = js["acceptance"]["cases"]
     assert all(set(c["sides"]) <= {"kL", "alpha", "Fc", "sigma2"} for c in cases)
     assert all(c["parameters"]["zeta_t"] == cases[0]["parameters"]["zeta_t"] for c in cases)
