@@ -65,7 +65,16 @@ def fit_one(path: Path, plant: dict, starts: int) -> dict:
                  "J_over_N": fit.shooting.search.cost / fit.problem.measured.size,
                  "agree": fit.shooting.search.agree,
                  "max_ratio": max(js["fit_quality"]["rms_over_scale"].values()),
-                 "reasons": " | ".join(js["optimum"]["not_confirmed_because"])}
+                 "reasons": " | ".join(js["optimum"]["not_confirmed_because"]),
+                 # for diagnosis: the runner-up won on the longest segments, the LM
+                 # iterations per stage, the intervals' widening terms for kL
+                 "runner_up_won": js.get("shooting", {}).get(
+                     "runner_up_won_on_longer_segments"),
+                 "stage_iterations": json.dumps(js.get("shooting", {}).get(
+                     "stage_iterations")),
+                 "kL_step_shift": (js.get("shooting", {}).get("step_shift") or {}).get("kL"),
+                 "kL_segment_shift": (js.get("shooting", {}).get("segment_shift")
+                                      or {}).get("kL")}
     for j, n in enumerate(fit.names):
         if n not in NAMES:
             continue

@@ -243,7 +243,11 @@ def lengthen_both(res: ShootingSearch, lengthen: tuple[float, ...], dt_search: f
                 shifts[k] = cand.x - x_before
     # the cost that counts is the longest segments': a runner-up that ends lower there wins
     # (on multisine logs the truth's basin can be the lower one at 0.2 s and not at 0.05 s)
-    runner_won = bool(runner is not None and runner.lengths == res.lengths
+    # (a runner-up that kept a longer length than the best and still costs less wins too:
+    # longer segments leave fewer free states, so they cannot cost less for the same fit)
+    runner_won = bool(runner is not None
+                      and (runner.lengths == res.lengths
+                           or len(runner.lengths) > len(res.lengths))
                       and runner.cost < res.cost * (1.0 - AGREE_REL))
     if runner_won:
         res, runner = runner, res
@@ -339,9 +343,11 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     res.agree = 1 + int(x_runner is not None and
                         bool(np.all(np.abs(x_runner[prim] - x_best_coarse[prim]) <= hw)))
     if res.agree < 2:
-        seg = f"{res.lengths[-1]:g} s" if res.lengths else "the search's"
-        versus = ("" if runner is None else f"; on {seg} segments the estimate's cost is J = "
-                  f"{cost_coarse:.6g}, the runner-up's {runner.cost:.6g}")
+        def seg(r: ShootingSearch) -> str:
+            return f"{r.lengths[-1]:g} s" if r.lengths else "the search's"
+
+        versus = ("" if runner is None else f"; the estimate's cost is J = {cost_coarse:.6g} "
+                  f"on {seg(res)} segments, the runner-up's {runner.cost:.6g} on {seg(runner)}")
         reasons.append(f"no other of the {n_fin} starts that ran to the end came within the "
                        f"estimate's 95 % intervals{versus}: the search may have missed a "
                        "better optimum (try more starts)"
