@@ -204,7 +204,7 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     log      ``log(text)``: one line per input as it starts
     n_jobs, backend, scheduler, force, progress   as ``api.sweep``
     """
-    from ema_cli.api._inputs import choice_arg, number_arg
+    from ema_cli.api._inputs import capped_jobs, check_sensitivity_steps, choice_arg, number_arg
     from ema_cli.api.study import _parallel_args
     from ema_cli.config.loader import load_config
     from ema_cli.config.sensitivity import SensitivityConfig
@@ -214,8 +214,6 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     number_arg(n, "n", low=1, integer=True)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, SensitivityConfig)
-    from ema_cli.api._inputs import capped_jobs, check_sensitivity_steps
-
     check_sensitivity_steps(cfg, method, n, source_name(config))
     n_jobs = capped_jobs(n_jobs, cfg, backend)
     res = run_sensitivity(cfg, folder_arg(out), method, n, n_jobs=n_jobs, backend=backend,
