@@ -9,14 +9,14 @@ DFT of the load angle against the DFT of the reference over the same window: gai
 nonlinearity indicator; from the recorded current and voltage demand and the position error,
 which limit was reached (SAT1 load-speed command, SAT2 voltage, SAT3 current).
 
-All amplitudes of one frequency run in one kernel batch. Units: SI inside, degrees and Hz in
-the results (``FreqPoint``).
+All amplitudes (and all actuators, for a batch of units) of one frequency run in one kernel
+batch. Units: SI inside, degrees and Hz in the results (``FreqPoint``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,31 +77,40 @@ def _bin(y: np.ndarray, k: int) -> complex:
     return 2.0 / n * complex(np.dot(y, np.exp(-2j * math.pi * k * np.arange(n) / n)))
 
 
-def _windows(params: Mapping[str, float], freqs_hz: Sequence[float], n_cases: int,
-             make_refs: Callable[[float], list[Any]], dt: float, parallel: bool,
-             ) -> Iterator[tuple[int, float, np.ndarray, np.ndarray]]:
-    """Run each frequency's batch (``make_refs(f)`` -> one signal per case) and yield
-    (frequency index, snapped frequency [Hz], measured window ``signals[case, sample, col]``,
-    diverged[case])."""
-    from ema_cli.model.params import to_row
-    from ema_cli.progress import report
-    from ema_cli.sim.runner import simulate_batch
+CHUNK_BYTES = 192 * 2**20  # recorded signals of one kernel call, at most [bytes]
 
-    row = to_row(params)
-    for j, f_req in enumerate(freqs_hz):
-        report("frequencies", j, len(freqs_hz))
-        f, dec, spp = snap_frequency(f_req, dt)
-        if dec * spp < 8 * (HARMONICS + 1):
-            raise EmaError(f"{f_req:g} Hz is too fast for dt = {dt:g} s (a period needs "
-                           f"{8 * (HARMONICS + 1)} steps at least)")
-        period_steps = dec * spp
-        settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * f))
-        n_steps = (settle + MEASURE_PERIODS) * period_steps
-        P = np.array([row] * n_cases)
-        res = simulate_batch(P, make_refs(f), np.arange(n_cases), dt, n_steps, dec,
+
+def _run_frequency(rows: Sequence[Mapping[str, float]], f_req: float,
+                   make_refs: Callable[[float], list[Any]], dt: float,
+                   parallel: bool) -> tuple[float, np.ndarray, np.ndarray]:
+    """Run case c with the SI parameters ``rows[c]`` on ``make_refs(f)[c]``, ``f`` the
+    frequency ``f_req`` snapped (:func:`snap_frequency`): the settling then the measured
+    periods, in kernel calls of at most :data:`CHUNK_BYTES` of recorded signals (the lanes
+    are independent, so the split changes no bit) -> (snapped frequency [Hz], measured
+    window ``signals[case, sample, col]``, diverged[case])."""
+    from ema_cli.model.params import to_row
+    from ema_cli.sim.runner import simulate_batch
+    from ema_cli.sim.tables import N_SIGNALS
+
+    f, dec, spp = snap_frequency(f_req, dt)
+    if dec * spp < 8 * (HARMONICS + 1):
+        raise EmaError(f"{f_req:g} Hz is too fast for dt = {dt:g} s (a period needs "
+                       f"{8 * (HARMONICS + 1)} steps at least)")
+    period_steps = dec * spp
+    settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * f))
+    n_steps = (settle + MEASURE_PERIODS) * period_steps
+    first = settle * spp
+    refs = make_refs(f)
+    per_case = (n_steps // dec + 1) * N_SIGNALS * 8
+    size = max(1, CHUNK_BYTES // per_case)
+    windows, diverged = [], []
+    for a in range(0, len(rows), size):
+        P = np.array([to_row(r) for r in rows[a:a + size]])
+        res = simulate_batch(P, refs[a:a + size], np.arange(len(P)), dt, n_steps, dec,
                              parallel=parallel)
-        first = settle * spp
-        yield j, f, res.signals[:, first:first + MEASURE_PERIODS * spp], res.diverged
+        windows.append(res.signals[:, first:first + MEASURE_PERIODS * spp])
+        diverged.append(res.diverged)
+    return f, np.concatenate(windows), np.concatenate(diverged)
 
 
 def _check_positive(values: Sequence[float], what: str, unit: str) -> list[float]:
@@ -116,26 +125,41 @@ def sinestream(params: Mapping[str, float], amplitudes_deg: Sequence[float],
                parallel: bool = True) -> list[FreqPoint]:
     """Simulate the sinestream of the SI parameters ``params`` -> one point per amplitude and
     frequency (amplitude-major)."""
+    return sinestream_units([params], amplitudes_deg, freqs_hz, dt, parallel)[0]
+
+
+def sinestream_units(units: Sequence[Mapping[str, float]], amplitudes_deg: Sequence[float],
+                     freqs_hz: Sequence[float], dt: float = 1e-5,
+                     parallel: bool = True) -> list[list[FreqPoint]]:
+    """The sinestream of each actuator of ``units`` (SI parameters), every unit and amplitude
+    of one frequency in one kernel batch -> per unit, one point per amplitude and frequency
+    (amplitude-major), bit for bit what :func:`sinestream` gives for that unit alone."""
+    from ema_cli.progress import report
     from ema_cli.sim.signals import InputSignal
 
     amps = _check_positive(amplitudes_deg, "amplitudes", "deg")
     freqs = _check_positive(freqs_hz, "frequencies", "Hz")
-    out: dict[tuple[int, int], FreqPoint] = {}
-    refs = lambda f: [InputSignal(kind="sine", amplitude=a * DEG, freq=f)  # noqa: E731
-                      for a in amps]
-    for j, f, win, diverged in _windows(params, freqs, len(amps), refs, dt, parallel):
-        for i, a in enumerate(amps):
-            sig = win[i]
+    rows = [u for u in units for _ in amps]
+    out: dict[tuple[int, int, int], FreqPoint] = {}
+    for j, f_req in enumerate(freqs):
+        report("frequencies", j, len(freqs))
+        f, win, diverged = _run_frequency(
+            rows, f_req, lambda f: [InputSignal(kind="sine", amplitude=a * DEG, freq=f)
+                                    for _ in units for a in amps], dt, parallel)
+        for c, p in enumerate(rows):
+            u, i = divmod(c, len(amps))
+            sig = win[c]
             y = sig[:, _COL["theta_load"]]
             y1 = _bin(y, MEASURE_PERIODS)
             h = y1 / _bin(sig[:, _COL["theta_ref"]], MEASURE_PERIODS)
             moved = abs(h) > 0.0  # a load that never leaves a dead band has no response
-            out[(i, j)] = FreqPoint(a, f, 20.0 * math.log10(abs(h)) if moved else -math.inf,
-                                    math.degrees(math.atan2(h.imag, h.real)) if moved
-                                    else math.nan, _thd(y, y1),
-                                    _limits(params, sig), bool(diverged[i]))
-    points = [out[(i, j)] for i in range(len(amps)) for j in range(len(freqs))]
-    return _unwrap(points, len(freqs))
+            out[(u, i, j)] = FreqPoint(amps[i], f, 20.0 * math.log10(abs(h)) if moved
+                                       else -math.inf,
+                                       math.degrees(math.atan2(h.imag, h.real)) if moved
+                                       else math.nan, _thd(y, y1), _limits(p, sig),
+                                       bool(diverged[c]))
+    return [_unwrap([out[(u, i, j)] for i in range(len(amps)) for j in range(len(freqs))],
+                    len(freqs)) for u in range(len(units))]
 
 
 def _thd(y: np.ndarray, y1: complex) -> float:
@@ -166,21 +190,42 @@ def compliance_stream(params: Mapping[str, float], amplitude_nm: float,
                       freqs_hz: Sequence[float], dt: float = 1e-5,
                       parallel: bool = True) -> list[CompliancePoint]:
     """The closed-loop response of the load angle to a sine load torque ``amplitude_nm``
-    [N*m] at each frequency (position reference held at 0), one kernel batch for all."""
+    [N*m] at each frequency (position reference held at 0), one kernel batch per frequency."""
+    return compliance_units([params], amplitude_nm, [freqs_hz], dt, parallel)[0]
+
+
+def compliance_units(units: Sequence[Mapping[str, float]], amplitude_nm: float,
+                     freqs_hz: Sequence[Sequence[float]], dt: float = 1e-5,
+                     parallel: bool = True) -> list[list[CompliancePoint]]:
+    """:func:`compliance_stream` of each actuator of ``units`` (SI parameters) at its own
+    frequencies ``freqs_hz[u]``: the units asking for the same frequency run in one kernel
+    batch -> per unit, its points in the order asked, bit for bit what
+    :func:`compliance_stream` gives for that unit alone."""
+    from ema_cli.progress import report
     from ema_cli.sim.signals import InputSignal
 
     (amp,) = _check_positive([amplitude_nm], "the load-torque amplitude", "N*m")
-    freqs = _check_positive(freqs_hz, "frequencies", "Hz")
-    out = []
-    for _, f, win, diverged in _windows(
-            params, freqs, 1, lambda f: [InputSignal(kind="step", amplitude=0.0,
-                                                      load_sine=(amp, f))], dt, parallel):
-        sig = win[0]
-        y = sig[:, _COL["theta_load"]]
-        y1 = _bin(y, MEASURE_PERIODS)
-        c = y1 / _bin(sig[:, _COL["torque_load"]], MEASURE_PERIODS)
-        out.append(CompliancePoint(f, c, _thd(y, y1), _limits(params, sig), bool(diverged[0])))
-    return out
+    asks = [_check_positive(fs, "frequencies", "Hz") for fs in freqs_hz]
+    who: dict[float, list[int]] = {}
+    for u, fs in enumerate(asks):
+        for f in fs:
+            who.setdefault(f, []).append(u)
+    got: dict[tuple[int, float], CompliancePoint] = {}
+    for j, (f_req, us) in enumerate(who.items()):
+        report("frequencies", j, len(who))
+        f, win, diverged = _run_frequency(
+            [units[u] for u in us], f_req,
+            lambda f, n=len(us): [InputSignal(kind="step", amplitude=0.0,
+                                              load_sine=(amp, f))] * n,
+            dt, parallel)
+        for c, u in enumerate(us):
+            sig = win[c]
+            y = sig[:, _COL["theta_load"]]
+            y1 = _bin(y, MEASURE_PERIODS)
+            z = y1 / _bin(sig[:, _COL["torque_load"]], MEASURE_PERIODS)
+            got[(u, f_req)] = CompliancePoint(f, z, _thd(y, y1), _limits(units[u], sig),
+                                              bool(diverged[c]))
+    return [[got[(u, f)] for f in fs] for u, fs in enumerate(asks)]
 
 
 def _limits(p: Mapping[str, float], sig: np.ndarray) -> tuple[str, ...]:

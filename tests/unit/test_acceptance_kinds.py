@@ -33,8 +33,8 @@ def test_every_kind_is_complete(name):
         assert dim in SI_UNIT and units_of(dim), (metric, dim)
         assert kind.metrics[metric] == SI_UNIT[dim]
         assert all(UNITS[u][0] == dim for u in units_of(dim))
-    # runner: (name, test, params, dt) -> TestRun
-    assert list(inspect.signature(kind.runner).parameters) == ["name", "test", "params", "dt"]
+    # runner, batched over units: (name, test, units, dt) -> list[TestRun]
+    assert list(inspect.signature(kind.runner).parameters) == ["name", "test", "units", "dt"]
     # figure: a function of report/acceptance_report.py taking (run, test, title)
     fig = getattr(acceptance_report, kind.figure, None)
     assert callable(fig), kind.figure
