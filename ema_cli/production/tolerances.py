@@ -451,8 +451,13 @@ class Tolerances:
         if not self.correlations:
             return u
         chol = np.linalg.cholesky(self.corr)
-        z = stats.norm.ppf(u) @ chol.T
-        return np.clip(stats.norm.cdf(z), U_MIN, 1.0 - U_MIN)
+        z = stats.norm.ppf(u)
+        zc = np.zeros_like(z)
+        for j in range(self.d):  # z' = L z, element by element: a BLAS product's rounding
+            for i in range(j + 1):  # depends on the batch's shape, this sum's does not
+                if chol[j, i] != 0.0:
+                    zc[:, j] += chol[j, i] * z[:, i]
+        return np.clip(stats.norm.cdf(zc), U_MIN, 1.0 - U_MIN)
 
     def values(self, u: np.ndarray) -> np.ndarray:
         """Independent uniforms U[n, d] -> X[n, d], each column in its path's unit."""
