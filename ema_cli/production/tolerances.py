@@ -411,6 +411,7 @@ class Tolerances:
     k: float
     source: str
     _targets: tuple[_Target, ...]
+    _writes: tuple[tuple[str, str], ...] = ()
 
     @property
     def d(self) -> int:
@@ -473,6 +474,12 @@ class Tolerances:
         equals ``vstack(sample(0, 4), sample(4, 10))`` exactly. ``sobol``: points start..stop-1
         of the scrambled Sobol' sequence of ``seed`` (its balance needs powers of two)."""
         return self.values(self.uniforms(start, stop, seed, method))
+
+    def model_parameters(self) -> dict[str, str]:
+        """Model parameter -> the tolerance path that sets it (``plant.NAME`` sets NAME; a
+        nonlinearity may set several, e.g. friction1: friction and sigma2), to refuse a spec
+        whose actuator sets the same parameter."""
+        return dict(self._writes)
 
     def box(self) -> tuple[np.ndarray, np.ndarray]:
         """(lower[d], upper[d]): the worst-case search box (normal: mean -+ k sd; truncnormal:
@@ -574,7 +581,7 @@ def load_tolerances(source: str | Path | Mapping[str, Any], *,
     corr, pairs = _correlation(f.correlation, paths, where)
     return Tolerances(paths=paths, laws=laws, units=tuple(t.unit for t in targets), corr=corr,
                       correlations=pairs, k=float(f.worst_case.k), source=where,
-                      _targets=tuple(targets))
+                      _targets=tuple(targets), _writes=tuple(writer.items()))
 
 
 def _correlation(given: Mapping[str, float], paths: tuple[str, ...], where: str

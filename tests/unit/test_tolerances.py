@@ -192,6 +192,13 @@ def test_sampling_does_not_depend_on_the_batches(full, method):
         parts = [full.sample(a, b, 11, method) for a, b in zip(edges, edges[1:], strict=False)]
         np.testing.assert_array_equal(np.vstack(parts), whole)  # exact, bit for bit
     assert full.sample(5, 5, 11, method).shape == (0, 5)
+    # larger, uneven batches of the bundled file (numpy and scipy pick other inner loops for
+    # long arrays; the values must not notice)
+    bundled = load_tolerances(ROOT / "configs" / "tolerances.yaml")
+    whole = bundled.sample(0, 3000, 123, method)
+    edges = [0, 1, 7, 16, 17, 1000, 1001, 2048, 2999, 3000]
+    parts = [bundled.sample(a, b, 123, method) for a, b in zip(edges, edges[1:], strict=False)]
+    np.testing.assert_array_equal(np.vstack(parts), whole)
 
 
 @pytest.mark.parametrize("method", ["random", "sobol"])
@@ -305,6 +312,12 @@ def test_pairs_describe_and_units(full):
                                   "high 0.004 [V]")
     with pytest.raises(EmaError, match="5 values"):
         full.pairs([1.0, 2.0])
+    assert full.model_parameters() == {"kL": "plant.kL", "alpha": "plant.alpha",
+                                       "Kt": "plant.Kt", "Fc": "plant.Fc",
+                                       "d1": "nonlinearities.deadzone1"}
+    friction = load_tolerances(_tol(nonlinearities__friction1=FC))
+    assert friction.model_parameters() == {"friction": "nonlinearities.friction1",
+                                           "sigma2": "nonlinearities.friction1"}
 
 
 def test_the_bundled_file_resolves_at_every_box_corner():
