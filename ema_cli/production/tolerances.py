@@ -325,7 +325,7 @@ class ToleranceFile(Strict):
 
 @dataclass(frozen=True)
 class _Target:
-    """What a path sets: its unit, how a value is checked, and its closed range (for the box)."""
+    """What a path sets: the unit of its values and their closed range (to clip the box)."""
 
     unit: str
     lower: float
