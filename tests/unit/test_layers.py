@@ -23,7 +23,7 @@ from pathlib import Path
 PACKAGE = "ema_cli"
 ROOT = Path(__file__).resolve().parents[2] / PACKAGE
 LAYERS = {"devtools": 8, "cli": 7, "api": 6, "report": 5, "analysis": 4, "sweep": 4, "identify": 4,
-          "acceptance": 4, "sensitivity": 4, "optim": 4, "tune": 4, "config": 3,
+          "acceptance": 4, "sensitivity": 4, "optim": 4, "tune": 4, "production": 4, "config": 3,
           "sim": 2, "model": 1}
 """Layer of each folder of the package; top-level modules are layer 0."""
 TOP = ""  # the "folder" of the top-level modules
