@@ -81,9 +81,9 @@ CHUNK_BYTES = 192 * 2**20  # recorded signals of one kernel call, at most [bytes
 
 
 def _run_frequency(rows: Sequence[Mapping[str, float]], f_req: float,
-                   make_refs: Callable[[float], list[Any]], dt: float,
+                   make_refs: Callable[[float], list[Any]], index: Sequence[int], dt: float,
                    parallel: bool) -> tuple[float, np.ndarray, np.ndarray]:
-    """Run case c with the SI parameters ``rows[c]`` on ``make_refs(f)[c]``, ``f`` the
+    """Run case c with the SI parameters ``rows[c]`` on ``make_refs(f)[index[c]]``, ``f`` the
     frequency ``f_req`` snapped (:func:`snap_frequency`): the settling then the measured
     periods, in kernel calls of at most :data:`CHUNK_BYTES` of recorded signals (the lanes
     are independent, so the split changes no bit) -> (snapped frequency [Hz], measured
@@ -106,8 +106,8 @@ def _run_frequency(rows: Sequence[Mapping[str, float]], f_req: float,
     windows, diverged = [], []
     for a in range(0, len(rows), size):
         P = np.array([to_row(r) for r in rows[a:a + size]])
-        res = simulate_batch(P, refs[a:a + size], np.arange(len(P)), dt, n_steps, dec,
-                             parallel=parallel)
+        res = simulate_batch(P, refs, np.asarray(index[a:a + size], dtype=np.int64), dt,
+                             n_steps, dec, parallel=parallel)
         windows.append(res.signals[:, first:first + MEASURE_PERIODS * spp])
         diverged.append(res.diverged)
     return f, np.concatenate(windows), np.concatenate(diverged)
@@ -140,12 +140,13 @@ def sinestream_units(units: Sequence[Mapping[str, float]], amplitudes_deg: Seque
     amps = _check_positive(amplitudes_deg, "amplitudes", "deg")
     freqs = _check_positive(freqs_hz, "frequencies", "Hz")
     rows = [u for u in units for _ in amps]
+    index = [i for _ in units for i in range(len(amps))]  # case -> its amplitude's signal
     out: dict[tuple[int, int, int], FreqPoint] = {}
     for j, f_req in enumerate(freqs):
         report("frequencies", j, len(freqs))
         f, win, diverged = _run_frequency(
             rows, f_req, lambda f: [InputSignal(kind="sine", amplitude=a * DEG, freq=f)
-                                    for _ in units for a in amps], dt, parallel)
+                                    for a in amps], index, dt, parallel)
         for c, p in enumerate(rows):
             u, i = divmod(c, len(amps))
             sig = win[c]
@@ -215,9 +216,8 @@ def compliance_units(units: Sequence[Mapping[str, float]], amplitude_nm: float,
         report("frequencies", j, len(who))
         f, win, diverged = _run_frequency(
             [units[u] for u in us], f_req,
-            lambda f, n=len(us): [InputSignal(kind="step", amplitude=0.0,
-                                              load_sine=(amp, f))] * n,
-            dt, parallel)
+            lambda f: [InputSignal(kind="step", amplitude=0.0, load_sine=(amp, f))],
+            [0] * len(us), dt, parallel)
         for c, u in enumerate(us):
             sig = win[c]
             y = sig[:, _COL["theta_load"]]
