@@ -289,6 +289,6 @@ def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
 
         report("worst case")
         t1 = time.perf_counter()
-        res.worst = search(plan, samples, worst_budget, plan.seed)
+        res.worst = search(plan, samples, worst_budget, plan.seed, res.drivers)
         res.timings["worst_case_s"] = time.perf_counter() - t1
     return res

@@ -139,11 +139,12 @@ def _rows_of(rows: list[Verdict]) -> list[Row]:
 
 
 def run_block(plan: YieldPlan, start: int, values: np.ndarray,
-              only: Sequence[str] | None = None) -> tuple[pd.DataFrame, dict[str, float]]:
+              only: Sequence[str] | None = None,
+              what: str | None = None) -> tuple[pd.DataFrame, dict[str, float]]:
     """Units ``start..start+len(values)-1`` with the sampled ``values`` through every test
-    (``only``: those tests) -> (one row per unit: ``unit``, the values by path, per limit
-    ``LABEL [UNIT]``, ``LABEL result``, ``LABEL margin``, per test ``TEST result``, ``result``;
-    wall time per test [s])."""
+    (``only``: those tests; ``what``: the progress label) -> (one row per unit: ``unit``, the
+    values by path, per limit ``LABEL [UNIT]``, ``LABEL result``, ``LABEL margin``, per test
+    ``TEST result``, ``result``; wall time per test [s])."""
     import pandas as pd
 
     from ema_cli.acceptance.kinds import run_units
@@ -155,7 +156,8 @@ def run_block(plan: YieldPlan, start: int, values: np.ndarray,
     per_unit: list[list[Verdict]] = [[] for _ in range(len(values))]
     walls = {}
     for j, name in enumerate(names):
-        report(f"units {start + 1}-{start + len(values)}: test {j + 1}/{len(names)} {name}")
+        report(f"{what or f'units {start + 1}-{start + len(values)}'} ({len(values)} "
+               f"units): test {j + 1}/{len(names)} {name}")
         test = plan.spec.tests[name]
         dts = {s[name][1] for s in setups}
         if len(dts) != 1:

@@ -5,7 +5,9 @@ The box: each tolerance's range (normal laws +-k sd, truncated and bounded laws 
 ``Tolerances.box``). The search, per test (only that test runs), every stage one batched call:
 
 1. the box's corners (all of them up to :data:`MAX_CORNERS`, else that many drawn at random
-   with a fixed seed) and its centre (the nominal unit);
+   with a fixed seed), its centre, and per limit the corner its drivers point to (each
+   tolerance at the edge where the sign of its SRRC, ``production.drivers``, says the margin
+   is smaller: the exact worst case when the margin is monotonic in every tolerance);
 2. differential evolution (``optim.de``, the project's optimiser, one kernel batch per
    generation) minimising the test's smallest margin, started from a Latin hypercube;
 3. every sampled unit of the yield run that lies inside the box (free: already measured).
@@ -31,7 +33,7 @@ if TYPE_CHECKING:
 
     from ema_cli.production.run import YieldPlan
 
-MAX_CORNERS = 256  # corners of the box evaluated at most per test [-]
+MAX_CORNERS = 16  # corners of the box evaluated at most per test, besides the predicted [-]
 
 
 @dataclass
@@ -48,16 +50,33 @@ class WorstCase:
     battery: pd.DataFrame | None = None
 
 
-def corners(lower: np.ndarray, upper: np.ndarray, seed: int) -> np.ndarray:
-    """The box's corners (at most :data:`MAX_CORNERS`: then a seeded random subset) and its
-    centre last [n, d]."""
+def corners(lower: np.ndarray, upper: np.ndarray, seed: int,
+            predicted: list[np.ndarray] | None = None) -> np.ndarray:
+    """The predicted corners (``predicted``: 0/1 per tolerance, 1 the upper edge), the box's
+    corners (at most :data:`MAX_CORNERS`: then a seeded random subset) and its centre last,
+    without repeats [n, d]."""
     d = len(lower)
     if 2 ** d <= MAX_CORNERS:
         bits = np.array(list(itertools.product((0, 1), repeat=d)), dtype=float)
     else:
         bits = np.random.default_rng([seed, 7]).integers(0, 2, (MAX_CORNERS, d)).astype(float)
-    pts = lower + bits * (upper - lower)
+    if predicted:
+        bits = np.vstack([np.array(predicted, dtype=float), bits])
+    _, first = np.unique(bits, axis=0, return_index=True)
+    pts = lower + bits[np.sort(first)] * (upper - lower)
     return np.vstack([pts, (lower + upper) / 2])
+
+
+def predicted_corners(drivers: list[dict[str, Any]], paths: list[str],
+                      labels: list[str]) -> list[np.ndarray]:
+    """Per limit of ``labels`` with drivers: each tolerance at the edge its SRRC's sign points
+    to (negative SRRC: a larger value eats the margin -> the upper edge)."""
+    out = []
+    for d in drivers:
+        if d["label"] in labels:
+            sign = dict(d["drivers"])
+            out.append(np.array([1.0 if sign.get(p, 0.0) < 0 else 0.0 for p in paths]))
+    return out
 
 
 class _TestProblem:
@@ -73,7 +92,7 @@ class _TestProblem:
     def run(self, X: np.ndarray, stage: str) -> pd.DataFrame:
         from ema_cli.production.run import run_block
 
-        df, _ = run_block(self.plan, 0, X, only=[self.test])
+        df, _ = run_block(self.plan, 0, X, only=[self.test], what=f"worst case, {stage}")
         df["stage"] = stage
         self.frames.append(df)
         return df
@@ -85,8 +104,8 @@ class _TestProblem:
         return m.min(axis=1)
 
 
-def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int,
-           seed: int) -> WorstCase:
+def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int, seed: int,
+           drivers: list[dict[str, Any]] | None = None) -> WorstCase:
     """The worst case of every limit of ``plan`` (module docstring); ``budget``: the units
     differential evolution may evaluate per test (0: corners and centre only)."""
     import pandas as pd
@@ -106,7 +125,8 @@ def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int,
     for name in plan.names:
         labels = [r.label for r in plan.rows if r.test == name]
         prob = _TestProblem(plan, name, lower, upper, labels)
-        prob.run(corners(lower, upper, seed), "corner")
+        prob.run(corners(lower, upper, seed,
+                         predicted_corners(drivers or [], paths, labels)), "corner")
         if budget > 0:
             pop = max(5, min(budget, 2 * len(paths)))
             run_de(prob, DEOptions(pop=pop, budget=max(budget, pop)),
@@ -130,7 +150,7 @@ def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int,
     worst = [v for v in out.limits.values() if v["found"]]
     if worst:
         U = np.unique(np.array([[v["values"][p] for p in paths] for v in worst]), axis=0)
-        bat, _ = run_block(plan, 0, U)
+        bat, _ = run_block(plan, 0, U, what="worst units, whole battery")
         keys = [tuple(row) for row in U]
         for v in worst:
             v["battery"] = str(bat["result"].iloc[keys.index(
