@@ -18,7 +18,7 @@ PIPI    := $(BIN)/python -m pip install -q --require-hashes --no-deps
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci design-ci clean \
+.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci yield-ci design-ci clean \
         lock upgrade compile
 
 help:  ## list the targets
@@ -56,12 +56,13 @@ test: $(TSTAMP)  ## lint, undeclared imports (deptry), the fast tier of the test
 test-all: test  ## make test, then the slow tier (cold compiles, long end-to-end checks)
 	$(BIN)/python -m pytest -n auto -m slow
 
-bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, the identification battery (hours)
+bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, yield, the identification battery (hours)
 	$(BIN)/python experiments/bench_compile.py
 	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
+	$(BIN)/python experiments/bench_yield.py
 	$(BIN)/python experiments/bench_identify_logs.py
 	$(BIN)/python -m experiments.loggen.battery --out results/battery/logs --n 20 --seed 2026 --jobs 2
 	$(BIN)/python experiments/identify_battery.py --battery results/battery/logs --out results/battery/fits
@@ -84,6 +85,11 @@ acceptance: $(STAMP)  ## the acceptance battery of the reference EMA (configs/ac
 acceptance-ci: $(STAMP)  ## the same as CI runs it (replaces results/acceptance-ci)
 	rm -rf results/acceptance-ci
 	$(EMA) acceptance configs/acceptance.yaml --out results/acceptance-ci
+
+yield-ci: $(STAMP)  ## ema yield of the reference battery at a small N, its claim (replaces results/yield-ci)
+	rm -rf results/yield-ci
+	$(EMA) yield configs/acceptance.yaml --tolerances configs/tolerances.yaml --n 32 --seed 0 \
+	  --worst-budget 16 --min-yield 0.25 --out results/yield-ci
 
 design-ci: $(STAMP)  ## ema design on the bundled log, small budget (replaces results/design-ci)
 	rm -rf results/design-ci

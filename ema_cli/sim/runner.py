@@ -59,6 +59,10 @@ arrays stay in cache): a step input 5-8 ns/step, 4-6x less than at 2**16 or in o
 35-45 ns/step. A kernel call's fixed cost (~11 us) is then < 1.5 % of a one-configuration call
 (~1 ms). ``experiments/bench.py`` ("time chunks") prints both for 2**12, 2**14 and 2**16."""
 BUDGET_ENV = "EMA_MAX_RECORD_BYTES"  # overrides the memory budget of one batch's results
+TALLY = {"lane_steps": 0, "kernel_s": 0.0, "calls": 0}
+"""Every :func:`simulate_batch` of this process adds its cases x steps, its time inside the
+compiled kernel [s] and 1 call: benchmarks read it (reset it to zero first) for the kernel's
+throughput inside a command. Counting only, never read by a computation."""
 
 
 @dataclass
@@ -322,6 +326,9 @@ def simulate_batch(
             progress(min(k1, n_steps + 1) / (n_steps + 1))
         k0 = k1
     t_out = np.arange(n_out) * (dec * dt)
+    TALLY["lane_steps"] += n_cases * n_steps
+    TALLY["kernel_s"] += kernel_s
+    TALLY["calls"] += 1
     return BatchResult(P, met, sig if dec > 0 else None, t_out, dt, n_steps, dec, kernel_s,
                        load_s)
 
