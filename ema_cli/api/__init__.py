@@ -30,6 +30,7 @@ from ema_cli.api.identify_logs import (
     make_identification_data,
 )
 from ema_cli.api.margins import LoopMargins, margins
+from ema_cli.api.production import YieldResult, production_yield
 from ema_cli.api.reproduce import ReproduceResult, reproduce
 from ema_cli.api.result import Result
 from ema_cli.api.sensitivity import Sensitivity, sensitivity
@@ -40,8 +41,9 @@ from ema_cli.api.tune import TuneResult, tune
 from ema_cli.errors import EmaError
 
 __all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
-           "FrictionSweepIdentification", "Identification", "LoopMargins", "ReproduceResult",
-           "Result", "Sensitivity", "Simulation", "Sweep", "SyntheticData", "Threshold",
-           "TuneResult", "acceptance", "freqresp", "identify", "identify_closed_loop",
-           "identify_friction_sweep", "make_identification_data", "margins", "reproduce",
+           "FrictionSweepIdentification", "Identification", "LoopMargins",
+           "ReproduceResult", "Result", "Sensitivity", "Simulation", "Sweep",
+           "SyntheticData", "Threshold", "TuneResult", "YieldResult", "acceptance",
+           "freqresp", "identify", "identify_closed_loop", "identify_friction_sweep",
+           "make_identification_data", "margins", "production_yield", "reproduce",
            "sensitivity", "simulate", "sweep", "threshold", "tune"]

@@ -155,6 +155,8 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
             raise EmaError(f"only: no test {unknown[0]!r} in the spec; tests: "
                            f"{', '.join(names)}")
         names = [n for n in names if n in set(only)]
+    from ema_cli.acceptance.setup import test_setups
+
     (params, _), setups = test_setups(sp, names, base_dir(spec))
     t0 = time.perf_counter()
     runs = []
@@ -172,37 +174,3 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
             progress(run)
     return AcceptanceResult(sp, str(spec) if isinstance(spec, str | Path) else "dict", runs,
                             rows, params, time.perf_counter() - t0, pairs)
-
-
-Setup = tuple[dict[str, float], float]
-"""An actuator's SI parameters and its simulation step [s]."""
-
-
-def test_setups(sp: AcceptanceSpec, names: Sequence[str],
-                folder: Path | None) -> tuple[Setup, dict[str, Setup]]:
-    """The spec's actuator, and each named test's (the actuator with the test's ``set:`` on
-    top), every test checked measurable before any simulation; ``folder``: where the spec's
-    relative paths start (None: the working folder)."""
-    from ema_cli.config.acceptance import check_measurable
-    from ema_cli.config.loader import dotted_pairs, load_config, resolve_run
-    from ema_cli.config.study import StudyConfig
-
-    act_source, act_dir = sp.actuator.source(folder, "spec")
-    base_pairs = sp.actuator.pairs()
-
-    def resolved(extra: list[tuple[str, Any]], where: str) -> tuple[dict[str, float], float]:
-        try:
-            cfg = load_config(act_source, base_pairs + extra, StudyConfig)
-        except EmaError as exc:
-            raise EmaError(f"{where}: {exc}") from None
-        run = resolve_run(cfg, act_dir)
-        return run.params, run.dt
-
-    actuator = resolved([], "actuator")
-    setups = {}
-    for name in names:  # every test's actuator and time step, checked before any simulation
-        test = sp.tests[name]
-        setups[name] = actuator if not test.overrides else resolved(
-            dotted_pairs(test.overrides), f"tests.{name}.set")
-        check_measurable(name, test, setups[name][1])
-    return actuator, setups

@@ -140,7 +140,7 @@ class YieldResult:
 
 def _plan(spec: ConfigSource, tolerances: ConfigSource, overrides: Overrides, seed: int,
           method: str, k: float | None) -> YieldPlan:
-    from ema_cli.api.acceptance import test_setups
+    from ema_cli.acceptance.setup import test_setups
     from ema_cli.config.acceptance import AcceptanceSpec
     from ema_cli.config.loader import load_config
     from ema_cli.production.run import YieldPlan

@@ -89,7 +89,7 @@ def unit_pairs(plan: YieldPlan, row: np.ndarray) -> list[tuple[str, Any]]:
 def unit_setups(plan: YieldPlan, values: np.ndarray) -> list[dict[str, Any]]:
     """Each unit's setups: test -> (SI parameters, dt), as ``ema acceptance`` resolves them
     with the unit's values as ``--set actuator.PATH=VALUE``."""
-    from ema_cli.api.acceptance import test_setups
+    from ema_cli.acceptance.setup import test_setups
     from ema_cli.config.acceptance import AcceptanceSpec
     from ema_cli.config.loader import load_config
 

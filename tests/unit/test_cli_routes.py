@@ -28,6 +28,7 @@ ROUTES = {
     "margins": "ema_cli.api.margins.margins",
     "freqresp": "ema_cli.api.freqresp.freqresp",
     "acceptance": "ema_cli.api.acceptance.acceptance",
+    "yield": "ema_cli.api.production.production_yield",
     "tune": "ema_cli.api.tune.tune",
     "sensitivity": "ema_cli.api.sensitivity.sensitivity",
     "identify": "ema_cli.api.identification.identify",
@@ -46,7 +47,7 @@ NO_ROUTE = {
 """Commands without a compute route, each with the reason."""
 
 COMPUTE = ("sweep", "sensitivity", "analysis", "identify", "tune", "acceptance", "optim", "sim",
-           "model")
+           "model", "production")
 """Folders of ema_cli a command may reach only through the API."""
 WRITERS = ("run_", "write_", "save_", "finish_", "prepare_", "compute_")
 """Report functions that write or run: the API calls them, a command never does."""

@@ -14,7 +14,8 @@ from scipy import stats
 
 from ema_cli.config.loader import load_config, resolve_run
 from ema_cli.errors import EmaError
-from ema_cli.production.tolerances import Z_MAX, load_tolerances
+from ema_cli.production.laws import Z_MAX
+from ema_cli.production.tolerances import load_tolerances
 
 ROOT = Path(__file__).resolve().parents[2]
 N = {"dist": "normal", "mean": 590, "sd": 15}
