@@ -40,10 +40,13 @@ from ema_cli.api.threshold import Threshold, threshold
 from ema_cli.api.tune import TuneResult, tune
 from ema_cli.errors import EmaError
 
+yield_ = production_yield
+"""``ema yield`` by its command's name (``yield`` is a Python keyword)."""
+
 __all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
            "FrictionSweepIdentification", "Identification", "LoopMargins",
            "ReproduceResult", "Result", "Sensitivity", "Simulation", "Sweep",
            "SyntheticData", "Threshold", "TuneResult", "YieldResult", "acceptance",
            "freqresp", "identify", "identify_closed_loop", "identify_friction_sweep",
-           "make_identification_data", "margins", "production_yield", "reproduce",
+           "make_identification_data", "margins", "production_yield", "yield_", "reproduce",
            "sensitivity", "simulate", "sweep", "threshold", "tune"]

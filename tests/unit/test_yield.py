@@ -56,7 +56,8 @@ TOL = {"tolerances": {
     "plant.kL": {"dist": "normal", "mean": 590, "sd": 20},
     "nonlinearities.deadzone2": {"dist": "uniform", "low": 0.0, "high": 0.01},
     "plant.Kt": {"dist": "truncnormal", "mean": 0.08, "sd": 0.003, "low": 0.075,
-                 "high": 0.085}}}
+                 "high": 0.085},
+    "plant.Kpp": {"dist": "uniform", "low": 45.0, "high": 55.0}}}  # a controller gain too
 
 
 @pytest.fixture(scope="module")
