@@ -30,9 +30,16 @@ def _run(n: int, worst: int | None = None, out: Path | None = None):
 
     TALLY.update(lane_steps=0, kernel_s=0.0, calls=0)
     t0 = time.perf_counter()
-    res = production_yield(SPEC, TOL, n=n, seed=0, block=100, worst_budget=worst)
+    res = production_yield(SPEC, TOL, n=n, seed=0, block=100, worst_budget=None)
     wall = time.perf_counter() - t0
-    res.tally = dict(TALLY)
+    res.tally = dict(TALLY)  # the units' kernel calls only
+    if worst is not None:  # what production_yield(worst_budget=worst) does after the units
+        from ema_cli.production.worst import search
+
+        t1 = time.perf_counter()
+        res.worst = search(res.plan, res.samples, worst, res.plan.seed, res.drivers)
+        res.timings["worst_case_s"] = time.perf_counter() - t1
+        res.settings["worst_budget"] = worst
     if out is not None:
         res.save(out)
     return wall, res
@@ -57,7 +64,7 @@ def main() -> int:
         walls, res = [], None
         for _ in range(reps):
             w, res = _run(n, args.worst if last else None, args.out if last else None)
-            walls.append(w - res.timings.get("worst_case_s", 0.0))
+            walls.append(w)
         wall = statistics.median(walls)
         goal = 120 if n <= 200 else 600
         tests = {k[5:]: v for k, v in res.timings.items() if k.startswith("test ")}

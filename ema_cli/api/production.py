@@ -222,6 +222,8 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
         folder, resumed = prepare_output(COMMAND, plan.spec.name, fp, folder_arg(out),
                                          resume=True)
         done, rows = read_blocks(folder) if resumed else (None, None)
+        if done is not None and len(done) > n:  # asked for fewer than were run: the first n
+            done = done.iloc[:n].reset_index(drop=True)
         if rows:
             plan.rows = rows
         write_plan(folder, plan, settings)

@@ -169,6 +169,10 @@ def run_block(plan: YieldPlan, start: int, values: np.ndarray,
         for k, run in enumerate(runs):
             per_unit[k] += verdicts(run, test.limits)
     rows = _rows_of(per_unit[0])
+    if only is None and plan.rows and [(r.test, r.metric, r.condition) for r in rows] != \
+            [(r.test, r.metric, r.condition) for r in plan.rows]:
+        raise EmaError(f"units {start}..{start + len(values) - 1}: the battery measured other "
+                       "conditions than the earlier blocks' (a resumed run of another spec?)")
     for k, vs in enumerate(per_unit):
         if [(v.test, v.metric, v.condition) for v in vs] != \
                 [(r.test, r.metric, r.condition) for r in rows]:

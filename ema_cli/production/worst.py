@@ -124,6 +124,8 @@ def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int, seed: int
         inside["stage"] = "sampled"
     for name in plan.names:
         labels = [r.label for r in plan.rows if r.test == name]
+        if not labels:  # a test without limits has no margin to search
+            continue
         prob = _TestProblem(plan, name, lower, upper, labels)
         prob.run(corners(lower, upper, seed,
                          predicted_corners(drivers or [], paths, labels)), "corner")

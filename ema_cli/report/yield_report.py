@@ -189,8 +189,8 @@ def yield_markdown(res: Any) -> str:
         fin = v[np.isfinite(v)]
         rows.append([r.label, r.limit_text, _pct(rate.value), rate.n_fail,
                      rate.n_inconclusive,
-                     md_cell(float(np.median(fin))) if fin.size else "n/a",
-                     f"{md_cell(float(fin.min()))} to {md_cell(float(fin.max()))}"
+                     f"{md_cell(float(np.median(fin)))} {r.unit}" if fin.size else "n/a",
+                     f"{md_cell(float(fin.min()))} to {md_cell(float(fin.max()))} {r.unit}"
                      if fin.size else "n/a"])
     out += [md_table(rows, ["limit", "spec", "yield", "fail", "inconclusive",
                             "median", "range measured"]), ""]
