@@ -142,9 +142,9 @@ def sweep_cmd(
 
 
 KINDS = ("auto", "study", "experiment", "identify", "acceptance", "sensitivity", "tune",
-         "design")
+         "design", "tolerances")
 """What `ema validate` can check: a study config, an experiment batch, identification settings,
-an acceptance spec, a sensitivity study."""
+an acceptance spec, a sensitivity study, a tuning or design config, a tolerance file."""
 
 
 def detect_kind(config: Path) -> str:
@@ -152,6 +152,8 @@ def detect_kind(config: Path) -> str:
     from ema_cli.config.loader import read_yaml
 
     keys = set(read_yaml(config))
+    if "tolerances" in keys:
+        return "tolerances"
     if keys & {"identify", "tune"}:
         return "design"
     if keys & {"scenarios", "variables", "optimiser"}:
@@ -176,7 +178,8 @@ def validate_cmd(
         "--kind", help="What CONFIG is: study (`ema sweep`/`simulate`), experiment "
                        "(`ema reproduce`), identify (`ema identify`), acceptance (`ema "
                        "acceptance`), sensitivity (`ema sensitivity`), tune (`ema tune`), "
-                       "design (`ema design`) or auto (from its keys).")
+                       "design (`ema design`), tolerances (`ema yield --tolerances`) or auto "
+                       "(from its keys).")
     ] = "auto",
 ) -> None:
     """Check CONFIG against its schema (fast: nothing is simulated); for a study, count its
@@ -186,6 +189,17 @@ def validate_cmd(
     if kind == "auto":
         kind = detect_kind(config)
     overrides = parse_assignments(set_, "--set")
+    if kind == "tolerances":
+        from ema_cli.production.tolerances import load_tolerances
+
+        if overrides:
+            raise EmaError("--set: a tolerance file takes no overrides (edit the file)")
+        tol = load_tolerances(config)
+        console.print(f"{config}: valid tolerance file; {len(tol.paths)} laws "
+                      f"({', '.join(tol.paths)}), {len(tol.correlations)} "
+                      f"correlation{'' if len(tol.correlations) == 1 else 's'}, "
+                      f"worst-case box +-{tol.k:g} sd")
+        return
     if kind == "experiment":
         from ema_cli.analysis.reproduce import load_experiment
 

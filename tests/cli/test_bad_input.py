@@ -30,6 +30,8 @@ WRITERS = {
     "freqresp": ["freqresp", "--amplitudes", "1", "--f-min", "5", "--f-max", "10", "--n", "2"],
     "reproduce": ["reproduce", str(ROOT / "experiments" / "paper2020.yaml")],
     "acceptance": ["acceptance", str(ROOT / "configs" / "acceptance.yaml"), "--only", "margins"],
+    "yield": ["yield", str(ROOT / "configs" / "acceptance.yaml"), "--tolerances",
+              str(ROOT / "configs" / "tolerances.yaml"), "--n", "1", "--no-worst"],
     "tune": ["tune", str(ROOT / "configs" / "tune.yaml"), "--budget", "128"],
     "design": ["design", str(ROOT / "experiments" / "logs" / "design_hc_1pct.csv")],
     "sensitivity": ["sensitivity", str(ROOT / "configs" / "sensitivity.yaml"), "--n", "1",
