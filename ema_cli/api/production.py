@@ -164,8 +164,10 @@ def _plan(spec: ConfigSource, tolerances: ConfigSource, overrides: Overrides, se
                        f"(actuator.{clash[0][0]}); the tolerance would replace it in every "
                        "unit: remove one of the two")
     test_setups(sp, list(sp.tests), base_dir(spec))  # the nominal battery is measurable
-    return YieldPlan(sp, spec if not isinstance(spec, Path) else str(spec), base_dir(spec),
+    plan = YieldPlan(sp, spec if not isinstance(spec, Path) else str(spec), base_dir(spec),
                      pairs, list(sp.tests), tol, seed, method)
+    plan.values(0, 0)  # the seed and the method checked before any folder is made
+    return plan
 
 
 def _fingerprint(plan: YieldPlan) -> str:
@@ -195,7 +197,6 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
     or a new one under results/yield/) and an interrupted run of the same inputs resumes from
     it. ``progress(state)`` is called after each block with the counts and the interval."""
     from ema_cli.api._inputs import callable_arg
-    from ema_cli.production.run import rate, run_block
 
     callable_arg(progress, "progress")
     for name, v, lo in (("n", n, 1), ("block", block, 1)):
@@ -228,15 +229,15 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
             plan.rows = rows
         write_plan(folder, plan, settings)
     return _run(plan, settings, folder, done, n, level, target_halfwidth, block, worst_budget,
-                drivers, progress, rate, run_block)
+                drivers, progress)
 
 
 def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
          done: pd.DataFrame | None, n: int, level: float, target: float | None, block: int,
-         worst_budget: int | None, drivers: bool, progress: Any, rate: Any,
-         run_block: Any) -> YieldResult:
+         worst_budget: int | None, drivers: bool, progress: Any) -> YieldResult:
     import pandas as pd
 
+    from ema_cli.production.run import rate, run_block
     from ema_cli.progress import report
 
     t0 = time.perf_counter()

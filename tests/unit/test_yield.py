@@ -201,6 +201,7 @@ def test_srrc_signs_and_ranking_of_a_known_monotonic_model():
     ({"target_halfwidth": 0.0}, "target_halfwidth must be in"),
     ({"method": "lhs"}, "method must be one of random, sobol"),
     ({"worst_budget": -1}, "worst_budget must be"),
+    ({"seed": -1}, "seed must be an integer 0"),
 ])
 def test_bad_arguments_are_refused_naming_them(kwargs, match):
     with pytest.raises(EmaError, match=match):
