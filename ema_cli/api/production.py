@@ -170,6 +170,24 @@ def _plan(spec: ConfigSource, tolerances: ConfigSource, overrides: Overrides, se
     return plan
 
 
+def _check_size(plan: YieldPlan, n: int, block: int) -> None:
+    """Refuse more units than the sampler numbers, or a block above the case-step cap of one
+    kernel workload (``limits.MAX_CASE_STEPS``: a block is what one checkpoint holds); announce
+    a large run's size and time."""
+    from ema_cli.acceptance.setup import test_setups
+    from ema_cli.limits import check_steps, cores
+    from ema_cli.production.laws import MAX_UNITS
+    from ema_cli.progress import announce_size
+
+    if n > MAX_UNITS:
+        raise EmaError(f"n must be at most {MAX_UNITS} (2**30) units, got {n}")
+    _, setups = test_setups(plan.spec, plan.names, plan.folder)
+    per_unit = sum(plan.spec.tests[t].sim_seconds() / setups[t][1] for t in plan.names)
+    check_steps(min(block, n) * per_unit, f"block: {min(block, n)} units of this battery",
+                "run fewer units per block")
+    announce_size(n, int(per_unit), cores(), "--n")
+
+
 def _fingerprint(plan: YieldPlan) -> str:
     from ema_cli.hashing import content_hash
 
@@ -203,13 +221,14 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
         if isinstance(v, bool) or not isinstance(v, int) or v < lo:
             raise EmaError(f"{name} must be an integer >= {lo}, got {v!r}")
     if not (isinstance(level, float | int) and 0.5 <= float(level) < 1.0):
-        raise EmaError(f"level (--ci) must be in [0.5, 1), got {level!r}")
+        raise EmaError(f"level must be in [0.5, 1), got {level!r}")
     if target_halfwidth is not None and not (0.0 < float(target_halfwidth) < 0.5):
         raise EmaError(f"target_halfwidth must be in (0, 0.5), got {target_halfwidth!r}")
     if worst_budget is not None and (isinstance(worst_budget, bool)
                                      or not isinstance(worst_budget, int) or worst_budget < 0):
         raise EmaError(f"worst_budget must be an integer >= 0 or None, got {worst_budget!r}")
     plan = _plan(spec, tolerances, overrides, seed, method, k)
+    _check_size(plan, n, block)
     fp = _fingerprint(plan)
     settings = {"n": n, "seed": seed, "method": method, "level": float(level),
                 "target_halfwidth": target_halfwidth, "k": plan.tolerances.k, "block": block,

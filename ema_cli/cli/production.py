@@ -92,7 +92,7 @@ def yield_cmd(
     res = as_options(lambda: production_yield(
         spec, tolerances, pairs, n=n, seed=seed, level=ci, target_halfwidth=target_halfwidth,
         method=method, k=k, block=block, worst_budget=None if no_worst else worst_budget,
-        out=out, checkpoint=True, progress=progress),
+        out=out, checkpoint=True, progress=progress), anywhere=False,
         level="--ci", target_halfwidth="--target-halfwidth", worst_budget="--worst-budget",
         method="--method", block="--block", n="--n", seed="--seed", k="--k")
     if res.resumed_units:

@@ -197,7 +197,9 @@ def test_srrc_signs_and_ranking_of_a_known_monotonic_model():
 
 @pytest.mark.parametrize(("kwargs", "match"), [
     ({"n": 0}, "n must be an integer >= 1"),
-    ({"level": 1.0}, r"level \(--ci\) must be in"),
+    ({"level": 1.0}, "level must be in"),
+    ({"n": 10**7, "block": 10**7}, "block: 10000000 units of this battery"),
+    ({"n": 2**31}, "n must be at most"),
     ({"target_halfwidth": 0.0}, "target_halfwidth must be in"),
     ({"method": "lhs"}, "method must be one of random, sobol"),
     ({"worst_budget": -1}, "worst_budget must be"),
