@@ -279,5 +279,25 @@ class ToleranceFile(Strict):
 
     @field_validator("correlation", mode="before")
     @classmethod
-    def _none_is_empty(cls, v: Any) -> Any:
-        return {} if v is None else v
+    def _pairs(cls, v: Any) -> Any:
+        """``{"A, B": r}`` as it is; also ``{A: {B: r}}`` (nested) and ``[[A, B, r], ...]``
+        (a list of triples), normalised to it; None: no correlation."""
+        if v is None:
+            return {}
+        if isinstance(v, list):
+            out = {}
+            for k, item in enumerate(v):
+                if not (isinstance(item, list | tuple) and len(item) == 3):
+                    raise _at(str(k), "expected [PATH, PATH, coefficient]")
+                out[f"{item[0]}, {item[1]}"] = item[2]
+            return out
+        if isinstance(v, dict) and any(isinstance(x, dict) for x in v.values()):
+            out = {}
+            for a, inner in v.items():
+                if not isinstance(inner, dict):
+                    raise _at(str(a), "expected {PATH: coefficient} when another "
+                                                  "entry is nested")
+                for b, r in inner.items():
+                    out[f"{a}, {b}"] = r
+            return out
+        return v

@@ -32,6 +32,7 @@ so a normal law that could draw a negative backlash is refused (use truncnormal)
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -332,10 +333,11 @@ def _correlation(given: Mapping[str, float], paths: tuple[str, ...], where: str
     pairs = []
     for key, r in given.items():
         head = f'{where}: correlation "{key}"'
-        names = [s.strip() for s in str(key).split(",")]
+        text = str(key).strip().strip("()[]")
+        names = [s.strip() for s in re.split(r"[,~]", text)]
         if len(names) != 2 or not all(names):
-            raise EmaError(f"{head}: expected two tolerance paths separated by a comma, e.g. "
-                           f'"{paths[0]}, {paths[-1]}"')
+            raise EmaError(f"{head}: expected two tolerance paths separated by a comma (or ~), "
+                           f'e.g. "{paths[0]}, {paths[-1]}"')
         for name in names:
             if name not in index:
                 raise EmaError(f"{head}: '{name}' is not in tolerances; expected one of "

@@ -332,3 +332,26 @@ def test_the_bundled_file_resolves_at_every_box_corner():
         cfg = load_config(None, t.pairs(row))
         resolve_run(cfg)
     assert np.all(lo <= t.nominal()) and np.all(t.nominal() <= hi)
+
+
+@pytest.mark.parametrize("given", [
+    {"plant.kL,plant.Kt": 0.4}, {"plant.kL ~ plant.Kt": 0.4}, {"(plant.kL, plant.Kt)": 0.4},
+    {"plant.kL": {"plant.Kt": 0.4}}, [["plant.kL", "plant.Kt", 0.4]]])
+def test_a_correlation_pair_may_be_written_several_ways(given):
+    base = {"plant.kL": {"dist": "normal", "mean": 590, "sd": 15},
+            "plant.Kt": {"dist": "uniform", "low": 0.076, "high": 0.084}}
+    tol = load_tolerances({"tolerances": base, "correlation": given})
+    assert tol.correlations == (("plant.kL", "plant.Kt", 0.4),)
+    assert tol.corr[0, 1] == tol.corr[1, 0] == 0.4
+
+
+@pytest.mark.parametrize(("given", "key"), [
+    ([["plant.kL", "plant.Kt"]], "correlation.0"),
+    ({"plant.kL": 0.3, "x": {"y": 1}}, "correlation.plant.kL"),
+    ({"plant.kL": {"plant.Kt": 1.4}}, "plant.kL, plant.Kt")])
+def test_a_malformed_correlation_is_one_line_naming_it(given, key):
+    base = {"plant.kL": {"dist": "normal", "mean": 590, "sd": 15},
+            "plant.Kt": {"dist": "uniform", "low": 0.076, "high": 0.084}}
+    with pytest.raises(EmaError) as exc:
+        load_tolerances({"tolerances": base, "correlation": given})
+    assert key in str(exc.value) and "\n" not in str(exc.value)
