@@ -244,6 +244,10 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
         done, rows = read_blocks(folder) if resumed else (None, None)
         if done is not None and len(done) > n:  # asked for fewer than were run: the first n
             done = done.iloc[:n].reset_index(drop=True)
+        if done is not None:
+            from ema_cli.progress import announce
+
+            announce(f"resuming the run in {folder}: {len(done)} units already done")
         if rows:
             plan.rows = rows
         write_plan(folder, plan, settings)

@@ -95,8 +95,6 @@ def yield_cmd(
         out=out, checkpoint=True, progress=progress), anywhere=False,
         level="--ci", target_halfwidth="--target-halfwidth", worst_budget="--worst-budget",
         method="--method", block="--block", n="--n", seed="--seed", k="--k")
-    if res.resumed_units:
-        err_console.print(f"resumed: {res.resumed_units} units from the earlier run")
     from ema_cli.progress import report
 
     report("writing files and figures")
