@@ -175,8 +175,15 @@ class ShootingProblem:
         if plan["index"] is not None:
             idx = plan["pad_index"][seg_of_row]  # [rows, L]
             r_ = np.arange(rows.shape[0])[:, None]
-            Y = sig[r_, idx][:, :, ch].transpose(0, 2, 1)
-            ends = sig[np.arange(rows.shape[0]), plan["end_index"][seg_of_row]][:, st]
+            # gather only the channels, not every recorded signal, channel by channel into
+            # [n_ch, rows, L] seen as [rows, n_ch, L]: the memory layout numpy gave the former
+            # sig[r_, idx][:, :, ch], so every later sum adds in the same order (bit-identical)
+            Yc = np.empty((len(ch), rows.shape[0], idx.shape[1]))
+            for q, c in enumerate(ch):
+                Yc[q] = sig[r_, idx, c]
+            Y = Yc.transpose(1, 0, 2)
+            ends = sig[np.arange(rows.shape[0])[:, None], plan["end_index"][seg_of_row][:, None],
+                       np.array(st)[None, :]]
         else:
             L = plan["pad_rel"].shape[1]
             Y = np.empty((rows.shape[0], len(ch), L))
