@@ -142,7 +142,7 @@ class ShootingProblem:
                 tt, rr = np.array([0.0, 1.0]), np.array([rr[0], rr[0]])
             sig = InputSignal("csv", table=(tuple(tt.tolist()), tuple(rr.tolist())),
                               path=lg.source)
-            refs.append(Sampler(sig, dt, n_steps))
+            refs.append(Sampler(sig, dt, n_steps, memo=True))  # run hundreds of times
         L = max(r.shape[0] for r in rel)
         plan = {"n_steps": n_steps, "dec": dec, "index": index, "rel": rel, "refs": refs,
                 "pad_rel": np.array([np.pad(r, (0, L - r.shape[0]), mode="edge") for r in rel])}

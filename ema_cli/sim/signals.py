@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -195,10 +196,12 @@ class Sampler:
     then :meth:`chunk` samples any range of steps.
 
     ``step_info[3]`` (is_step, final value [rad], step time [s]) for the step metrics;
-    ``has_load`` whether a load-torque profile is given.
+    ``has_load`` whether a load-torque profile is given. ``memo``: keep every chunk sampled
+    (read-only arrays) for a sampler run again and again on the same grid (the segments of a
+    multiple-shooting fit).
     """
 
-    def __init__(self, sig: InputSignal, dt: float, n_steps: int) -> None:
+    def __init__(self, sig: InputSignal, dt: float, n_steps: int, memo: bool = False) -> None:
         if sig.kind not in KINDS:
             raise EmaError(f"unknown input kind '{sig.kind}'; expected one of {KINDS}")
         self.signal = sig
@@ -215,6 +218,7 @@ class Sampler:
         is_step = sig.kind == "step" and sig.amplitude != 0.0
         self.step_info = np.array([1.0 if is_step else 0.0, sig.amplitude, sig.start],
                                   dtype=np.float64)
+        self._memo: dict[tuple[int, int], Any] | None = {} if memo else None
 
     @property
     def has_load(self) -> bool:
@@ -224,6 +228,18 @@ class Sampler:
         """The inputs of steps ``k0 <= k < k1`` (``0 <= k0 < k1 <= n_steps + 1``) ->
         (position at the half steps ``j = 2*k0 .. min(2*k1, 2*n_steps)`` [rad], velocity at the
         steps [rad/s], load torque at the half steps [N*m] or None)."""
+        if self._memo is None:
+            return self._sample(k0, k1)
+        key = (k0, k1)
+        if key not in self._memo:
+            out = self._sample(k0, k1)
+            for a in out:
+                if a is not None:
+                    a.flags.writeable = False
+            self._memo[key] = out
+        return self._memo[key]
+
+    def _sample(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         n, dt = self.n_steps, self.dt
         th = np.arange(2 * k0, min(2 * k1, 2 * n) + 1) * (0.5 * dt)
         pos = np.ascontiguousarray(_position(self.signal, th, self.duration, self._table),
