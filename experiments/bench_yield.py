@@ -5,8 +5,8 @@ largest run (its time reported apart from the units').
 
 In process, the kernel compiled and warm (one 16-unit warm-up), NUMBA_NUM_THREADS as `make
 bench` sets it. Walls are medians of REPEATS runs (1 for 1,000 units: ~25 min); the kernel's
-throughput is the lane-steps (cases x integration steps) of every kernel call
-(``sim.runner.TALLY``) per second inside the compiled kernel, and per second of the run's
+throughput is the units' lane-steps (cases x integration steps, ``sim.runner.TALLY``, kept
+in the run's timings) per second inside the compiled kernel, and per second of the run's
 wall. Nothing is asserted.
 """
 
@@ -26,20 +26,9 @@ TOL = ROOT / "configs" / "tolerances.yaml"
 
 
 def _run(n: int, worst: int | None = None, out: Path | None = None):
-    from ema_cli.sim.runner import TALLY
-
-    TALLY.update(lane_steps=0, kernel_s=0.0, calls=0)
     t0 = time.perf_counter()
-    res = production_yield(SPEC, TOL, n=n, seed=0, block=100, worst_budget=None)
-    wall = time.perf_counter() - t0
-    res.tally = dict(TALLY)  # the units' kernel calls only
-    if worst is not None:  # what production_yield(worst_budget=worst) does after the units
-        from ema_cli.production.worst import search
-
-        t1 = time.perf_counter()
-        res.worst = search(res.plan, res.samples, worst, res.plan.seed, res.drivers)
-        res.timings["worst_case_s"] = time.perf_counter() - t1
-        res.settings["worst_budget"] = worst
+    res = production_yield(SPEC, TOL, n=n, seed=0, block=100, worst_budget=worst)
+    wall = time.perf_counter() - t0 - res.timings.get("worst_case_s", 0.0)
     if out is not None:
         res.save(out)
     return wall, res
@@ -71,11 +60,11 @@ def main() -> int:
         print(f"  {n:5d} units: {wall:7.1f} s (median of {reps}; goal < {goal} s; "
               f"{wall / n * 1000:.0f} ms per unit)  yield {100 * res.overall.value:.1f} % "
               f"[{100 * res.overall.interval[0]:.1f}, {100 * res.overall.interval[1]:.1f}]")
-        t = res.tally
-        print(f"      kernel: {t['lane_steps'] / 1e9:.2f} G lane-steps in {t['calls']} calls, "
-              f"{t['lane_steps'] / t['kernel_s'] / 1e6:.1f} M lane-steps/s inside the kernel, "
-              f"{t['lane_steps'] / res.timings['yield_s'] / 1e6:.1f} M/s of the run's wall "
-              f"({100 * t['kernel_s'] / res.timings['yield_s']:.0f} % in the kernel)")
+        steps, kernel_s = res.timings["kernel_lane_steps"], res.timings["kernel_s"]
+        print(f"      kernel: {steps / 1e9:.2f} G lane-steps, {steps / kernel_s / 1e6:.1f} M "
+              f"lane-steps/s inside the kernel, {steps / res.timings['yield_s'] / 1e6:.1f} M/s "
+              f"of the run's wall ({100 * kernel_s / res.timings['yield_s']:.0f} % in the "
+              "kernel)")
         for name, t in sorted(tests.items(), key=lambda kv: -kv[1]):
             print(f"      {name:22s} {t:7.1f} s  ({t / n * 1000:6.1f} ms per unit)")
         if last:

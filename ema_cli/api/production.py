@@ -86,14 +86,10 @@ class YieldResult:
     def to_json(self) -> dict[str, Any]:
         """yield.json: overall, tests, limits, drivers, worst case, settings, timings."""
 
-        def ci(r: Rate) -> dict[str, Any]:
-            return r.to_dict()
-
         out: dict[str, Any] = {
-            "overall": ci(self.overall),
-            "tests": {n: {**ci(r), "n_inconclusive": r.n_inconclusive}
-                      for n, r in self.tests.items()},
-            "limits": {lb: {**ci(r), "limit": row.limit_text, "test": row.test,
+            "overall": self.overall.to_dict(),
+            "tests": {n: r.to_dict() for n, r in self.tests.items()},
+            "limits": {lb: {**r.to_dict(), "limit": row.limit_text, "test": row.test,
                             "metric": row.metric, "condition": row.condition}
                        for (lb, r), row in zip(self.limits.items(), self.plan.rows,
                                                strict=True)},
@@ -262,7 +258,9 @@ def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
 
     from ema_cli.production.run import rate, run_block
     from ema_cli.progress import report
+    from ema_cli.sim.runner import TALLY
 
+    tally0 = dict(TALLY)
     t0 = time.perf_counter()
     frames = [] if done is None else [done]
     have = 0 if done is None else len(done)
@@ -303,7 +301,11 @@ def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
         frames.append(df)
         have += size
     samples = pd.concat(frames, ignore_index=True)
-    timings = {"yield_s": time.perf_counter() - t0, **{f"test {k}": v for k, v in walls.items()}}
+    timings = {"yield_s": time.perf_counter() - t0,
+               # the units' kernel work: its throughput is lane_steps / kernel_s
+               "kernel_s": TALLY["kernel_s"] - tally0["kernel_s"],
+               "kernel_lane_steps": TALLY["lane_steps"] - tally0["lane_steps"],
+               **{f"test {k}": v for k, v in walls.items()}}
     res = YieldResult(plan, samples, float(level), settings, history, timings, stop,
                       folder=folder, resumed_units=0 if done is None else len(done))
     if drivers:

@@ -25,11 +25,18 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, ClassVar, Literal, Union
+from typing import Any, ClassVar, Literal
 
-from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from ema_cli.config.base import FiniteFloat, PlainName, PositiveFloat, PositiveInt, Strict
+from ema_cli.config.base import (
+    FiniteFloat,
+    PlainName,
+    PositiveFloat,
+    PositiveInt,
+    Strict,
+    tagged_union,
+)
 from ema_cli.config.run import KEY_MARK, Scalar
 from ema_cli.errors import EmaError
 from ema_cli.units import SI_UNIT, UNITS, units_of
@@ -341,14 +348,7 @@ METRICS: dict[str, dict[str, str]] = {k: dict(cls.METRICS) for k, cls in _KINDS.
 """The metrics of each test kind and their dimensions (from each schema's ``METRICS``)."""
 
 
-def _tag(v: Any) -> str:
-    """The union tag of a test entry, ``test[KIND]`` (a ``loc`` element the loader drops)."""
-    kind = v.get("test") if isinstance(v, dict) else getattr(v, "test", None)
-    return f"test[{kind}]"
-
-
-TestSpec = Annotated[Union[tuple(Annotated[cls, Tag(f"test[{k}]")]  # noqa: UP007
-                                 for k, cls in _KINDS.items())], Discriminator(_tag)]
+TestSpec = tagged_union("test", _KINDS)
 
 
 class ActuatorSpec(Strict):

@@ -14,9 +14,18 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Annotated, Any
+from collections.abc import Mapping
+from typing import Annotated, Any, Union
 
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+)
 
 from ema_cli.errors import EmaError
 
@@ -100,3 +109,17 @@ def _plain_name(value: str) -> str:
 
 PlainName = Annotated[str, AfterValidator(_plain_name)]
 """A name safe to use as one file or folder name (never a path)."""
+
+
+def tagged_union(key: str, classes: Mapping[str, type]) -> Any:
+    """The union of ``classes`` (tag -> schema) told apart by the entry's ``key`` field (e.g.
+    ``test: step``, ``dist: normal``); each member tagged ``KEY[TAG]``, a ``loc`` element the
+    loader drops from its messages (``loader._UNION_TAG``)."""
+
+    def tag(v: Any) -> str:
+        name = v.get(key) if isinstance(v, dict) else getattr(v, key, None)
+        return f"{key}[{name}]"
+
+    return Annotated[Union[tuple(Annotated[cls, Tag(f"{key}[{k}]")]  # noqa: UP007
+                                 for k, cls in classes.items())], Discriminator(tag)]
+

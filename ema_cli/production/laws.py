@@ -4,13 +4,14 @@ file's schema; ``production.tolerances`` validates the paths, the correlation an
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, ClassVar, Literal, Union
+from abc import abstractmethod
+from typing import Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 from scipy import stats
 
-from ema_cli.config.base import FiniteFloat, PositiveFloat, Strict
+from ema_cli.config.base import FiniteFloat, PositiveFloat, Strict, tagged_union
 from ema_cli.config.run import KEY_MARK
 
 U_MIN = 1e-12
@@ -49,23 +50,26 @@ def _g(x: float) -> str:
 
 
 class _Law(Strict):
-    """One law; ``ppf`` maps uniforms in (0, 1) to values in the path's unit."""
+    """One law (an abstract base: every law defines the four methods below); ``ppf`` maps
+    uniforms in (0, 1) to values in the path's unit."""
 
     FIELDS: ClassVar[tuple[str, ...]] = ()
 
+    @abstractmethod
     def ppf(self, u: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        """Values [path unit] at the uniforms ``u``."""
 
+    @abstractmethod
     def nominal(self) -> float:
-        raise NotImplementedError
+        """The nominal value: mean, median, mode or midpoint."""
 
+    @abstractmethod
     def extremes(self) -> list[tuple[str, float]]:
         """(label, value) of the smallest and largest values the sampler draws."""
-        raise NotImplementedError
 
+    @abstractmethod
     def box(self, k: float) -> tuple[float, float]:
         """The worst-case search interval, before clipping to the parameter's range."""
-        raise NotImplementedError
 
     def describe(self) -> str:
         args = ", ".join(f"{f} {_g(getattr(self, f))}" for f in self.FIELDS)
@@ -224,14 +228,7 @@ _LAWS: dict[str, type[_Law]] = {"normal": Normal, "truncnormal": TruncNormal,
 DISTS = tuple(_LAWS)
 
 
-def _tag(v: Any) -> str:
-    """The union tag of a law, ``dist[NAME]`` (a ``loc`` element the loader drops)."""
-    dist = v.get("dist") if isinstance(v, dict) else getattr(v, "dist", None)
-    return f"dist[{dist}]"
-
-
-Law = Annotated[Union[tuple(Annotated[cls, Tag(f"dist[{k}]")]  # noqa: UP007
-                            for k, cls in _LAWS.items())], Discriminator(_tag)]
+Law = tagged_union("dist", _LAWS)
 
 
 class WorstCase(Strict):

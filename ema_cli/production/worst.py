@@ -22,7 +22,6 @@ worst case at a corner, which stage 1 covers exactly.
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -159,10 +158,3 @@ def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int, seed: int
                 tuple(v["values"][p] for p in paths))])
         out.battery = bat
     return out
-
-
-def is_corner(values: dict[str, float], lower: np.ndarray, upper: np.ndarray,
-              paths: list[str]) -> bool:
-    """Whether every value sits on an edge of the box."""
-    return all(math.isclose(values[p], lo) or math.isclose(values[p], hi)
-               for p, lo, hi in zip(paths, lower, upper, strict=True))

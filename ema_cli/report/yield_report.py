@@ -21,8 +21,9 @@ MAX_ECDF_POINTS = 4000  # points of an ECDF drawn at most (evenly thinned) [-]
 
 
 # ------------------------------------------------------------------------ checkpoints
-def write_plan(folder: Path, plan: Any, settings: dict[str, Any]) -> None:
-    """The run's inputs, written before the first block: the resolved spec and tolerances."""
+def write_snapshots(folder: Path, plan: Any) -> None:
+    """The run's inputs: the resolved spec and the tolerances (spec.resolved.yaml,
+    tolerances.yaml)."""
     import yaml
 
     write_text(folder / "spec.resolved.yaml",
@@ -30,6 +31,11 @@ def write_plan(folder: Path, plan: Any, settings: dict[str, Any]) -> None:
                               sort_keys=False))
     write_text(folder / "tolerances.yaml", yaml.safe_dump(plan.tolerances.to_dict(),
                                                           sort_keys=False))
+
+
+def write_plan(folder: Path, plan: Any, settings: dict[str, Any]) -> None:
+    """The run's inputs, written before the first block: the snapshots and the settings."""
+    write_snapshots(folder, plan)
     write_json(folder / BLOCKS / "settings.json", settings)
 
 
@@ -268,17 +274,12 @@ def _method_md(res: Any) -> list[str]:
 # ------------------------------------------------------------------------------ the folder
 def write_yield(folder: Path, res: Any) -> list[str]:
     """Write the report into ``folder`` -> the names written."""
-    import yaml
-
     from ema_cli.files import atomic_write
 
     names = ["yield.json", "samples.parquet", "yield.md", "convergence.png",
              "spec.resolved.yaml", "tolerances.yaml"]
-    write_text(folder / "spec.resolved.yaml",
-               yaml.safe_dump(res.plan.spec.model_dump(mode="json", by_alias=True),
-                              sort_keys=False))
-    write_text(folder / "tolerances.yaml", yaml.safe_dump(res.plan.tolerances.to_dict(),
-                                                          sort_keys=False))
+    if not (folder / "tolerances.yaml").exists():  # a checkpointed run wrote them first
+        write_snapshots(folder, res.plan)
     atomic_write(folder / "samples.parquet", lambda p: res.samples.to_parquet(p, index=False))
     write_json(folder / "yield.json", res.to_json())
     write_figure(folder / "convergence.png", convergence_figure(res))
