@@ -84,6 +84,7 @@ def fit_one(path: Path, plant: dict, starts: int) -> dict:
         row[f"{n}_truth"] = t
         row[f"{n}_err_pct"] = 100.0 * (float(fit.x[j]) / t - 1.0)
         row[f"{n}_covered"] = bool(lo <= t <= hi)
+        row[f"{n}_halfwidth_pct"] = 100.0 * (hi - lo) / (2.0 * t)
         row[f"{n}_determined"] = bool(js["parameters"][n]["determined"])
     return row
 

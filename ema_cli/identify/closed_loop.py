@@ -176,6 +176,7 @@ def noise_estimate(y: np.ndarray, t: np.ndarray) -> float:
 
 SCALE_FLOOR = 1e-4  # a channel's scale is at least this fraction of its range [-]
 NOISE_NOTE = "noise estimate (MAD of second differences / sqrt 6)"  # how an auto scale was chosen
+FLOOR_NOTE = f"{SCALE_FLOOR:g} x range (noise estimate below it)"  # ... for noise-free data
 
 
 def channel_scale(y: np.ndarray, t: np.ndarray) -> tuple[float, str]:
@@ -185,7 +186,7 @@ def channel_scale(y: np.ndarray, t: np.ndarray) -> tuple[float, str]:
     floor = SCALE_FLOOR * float(np.ptp(y))
     if noise >= floor:
         return noise, NOISE_NOTE
-    return floor, f"{SCALE_FLOOR:g} x range (noise estimate below it)"
+    return floor, FLOOR_NOTE
 
 
 @dataclass(frozen=True)

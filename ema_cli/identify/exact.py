@@ -127,7 +127,7 @@ def profile_nb(alphas, dth, dw, tq, c_fixed, fit_c, contact, inv_tau, max_iter, 
             changes = 0
             for i in range(n):
                 d = dth[i]
-                r = tq[i] - shaft_torque_nb(k, a, c, contact, inv_tau, 0.0, 0.0, d, dw[i])
+                r = tq[i] - shaft_torque_nb(k, a, c, contact, inv_tau, 0.0, 0.0, d, dw[i], 0.0)
                 jsum += r * r
                 if clamp and have_prev and (d > a or d < -a):
                     z = d - a if d > a else d + a

@@ -45,7 +45,8 @@ def cost_batch_nb(X, dth, dw, tq, c_fixed, contact, inv_tau, out):
             continue
         s = 0.0
         for i in range(n):
-            r = tq[i] - shaft_torque_nb(k, alpha, c, contact, inv_tau, 0.0, 0.0, dth[i], dw[i])
+            r = tq[i] - shaft_torque_nb(k, alpha, c, contact, inv_tau, 0.0, 0.0, dth[i], dw[i],
+                                           0.0)
             s += r * r
         out[p] = s
 

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import NOISE_NOTE, ClosedLoopProblem
+from ema_cli.identify.closed_loop import FLOOR_NOTE, NOISE_NOTE, ClosedLoopProblem
 from ema_cli.identify.shooting_search import (
     AGREE_REL,
     ShootingSearch,
@@ -122,10 +122,19 @@ def channel_ratios(problem: ClosedLoopProblem, r: np.ndarray) -> dict[str, float
             for j, c in enumerate(problem.channels)}
 
 
+JUDGED_NOTES = (NOISE_NOTE, FLOOR_NOTE)
+"""Channels whose scale was chosen automatically (their noise estimate, or the floor of
+noise-free data) are judged; a scale given by hand is the user's and is not. A noise-free
+log's channels sit on the floor: judging them too keeps a fit of such a log from being
+confirmed vacuously (measured: an independent steps log with 0.007 % noise, every channel on
+the floor, "confirmed" at kL -2.6 % with its segments fitting 1.8 x the floor)."""
+
+
 def too_high(ratios: dict[str, float], notes: dict[str, str],
              limit: float = NOISE_LEVEL_RATIO) -> dict[str, float]:
-    """The channels scaled by their noise estimate whose ratio exceeds ``limit``."""
-    return {c: v for c, v in ratios.items() if notes[c] == NOISE_NOTE and v > limit}
+    """The channels with an automatic scale (:data:`JUDGED_NOTES`) whose ratio exceeds
+    ``limit``."""
+    return {c: v for c, v in ratios.items() if notes[c] in JUDGED_NOTES and v > limit}
 
 
 def worst_windows(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray, channel: str,
@@ -143,12 +152,15 @@ def worst_windows(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray, 
 
 
 def mismatch_text(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray,
-                  high: dict[str, float]) -> str:
-    """Each channel of ``high`` with its ratio and the time ranges where it fits worst."""
+                  high: dict[str, float], notes: dict[str, str] | None = None) -> str:
+    """Each channel of ``high`` with its ratio and the time ranges where it fits worst
+    (``notes``: the channels' scale notes; a channel on the floor says so)."""
     parts = []
     for c, v in high.items():
         w = worst_windows(problem, first, r, c)
-        parts.append(f"{c} {v:.3g} x its noise estimate, worst at " + ", ".join(
+        what = ("its scale (1e-4 of its range: the log is nearly noise-free)"
+                if notes is not None and notes.get(c) == FLOOR_NOTE else "its noise estimate")
+        parts.append(f"{c} {v:.3g} x {what}, worst at " + ", ".join(
             f"t = {a:.3g}-{b:.3g} s ({q:.3g} x)" for a, b, q in w))
     return "; ".join(parts)
 
@@ -322,7 +334,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     reasons = []
     n_fin = len(res.final_cost)
     high = too_high(ratios, notes)
-    judged = [v for c, v in ratios.items() if notes[c] == NOISE_NOTE]
+    judged = [v for c, v in ratios.items() if notes[c] in JUDGED_NOTES]
     at_noise = bool(judged) and max(judged) <= AT_NOISE_RATIO
     # the runner-up agrees when, carried through the same lengthening, it ends within the
     # estimate's interval half-widths of the best one (both at the search's step)
@@ -344,15 +356,15 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     first = res.sp.seg.first
     if high:
         reasons.append("the segments do not fit the log to its noise level (" + mismatch_text(
-            problem, first, r_ms, high) + "): a local minimum or a model that cannot explain "
-            "the log there")
+            problem, first, r_ms, high, notes) + "): a local minimum or a model that cannot "
+            "explain the log there")
     else:
         loose = too_high(ratios, notes, CONFIRM_RATIO)
         if loose:
             reasons.append(f"the segments fit the log only to within {NOISE_LEVEL_RATIO:g} x "
                            f"its noise, not {CONFIRM_RATIO:g} x (" + mismatch_text(
-                               problem, first, r_ms, loose) + "): the model explains the log "
-                           "only approximately there, and the parameters absorb the rest")
+                               problem, first, r_ms, loose, notes) + "): the model explains "
+                           "the log only approximately there, and the parameters absorb the rest")
     edge = [n for n in on_bound(problem, res.x) if n not in nuisance]
     if edge:
         reasons.append(f"{', '.join(edge)} on a bound of the search: widen the bounds")

@@ -12,6 +12,8 @@ import numpy as np
 from ema_cli._numba import njit
 from ema_cli.model.elements import dead_zone_nb
 
+_INF = math.inf
+
 FORMS = ("contact", "paper")
 """Damping forms: ``contact`` (the default; T = 0 in the gap and never pulls) or ``paper``."""
 
@@ -27,7 +29,7 @@ def hc_gain(hc: float, pen_ref: float) -> float:
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
-def shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw):
+def shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw, hw):
     """Transmission torque T [N*m, load side] for deflection ``dth`` [rad] and rate ``dw`` [rad/s].
 
     ``dth = theta_m/m - theta_L``, ``dw = w_m/m - w_L`` (load side); ``kL`` [N*m/rad],
@@ -53,25 +55,45 @@ def shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw):
     touch: with ``h = 1`` and ``tau = 0``, ``T = kL*pen*(1 + lam*dpen/dt)``, ``lam =
     c/(kL*contact_pen)`` (Hunt and Crossley 1975, linear spring). With
     ``alpha = 0`` both forms are the permanent-contact shaft ``T = kL*dth + c*dw`` (no tau).
+
+    ``hw`` [s] (the fixed-step simulator passes ``dt/2``; 0: the exact law) regularises the
+    jump form for a fixed-step integrator: on a *closing* contact the damping's weight rises
+    linearly from 0 to 1 across the penetration band ``|pen| <= half = hw*|dw|`` (at most
+    ``alpha/2``), i.e. over the one step centred on the touch instead of at the first RK4
+    stage that finds the contact. The torque is then continuous in the state, so the simulated
+    trajectory is continuous in the parameters (an impact moving across the step grid no
+    longer moves the output by a step's worth of damping), and the impulse of the damping
+    differs from the exact jump's by O(dt^2) instead of O(dt) (the ramp minus the step is odd
+    about the touch). Inside the band's lower half the contact pushes by its damping alone (the
+    spring starts at pen = 0); separation (opening) is untouched. With ``tau > 0`` or
+    ``hw = 0`` every value is the unregularised law's, bit for bit.
     Branch-free (selects), so it vectorises.
     """
     spring = kL * dead_zone_nb(dth, alpha)
     t = spring + c * dw
-    # in contact pen > 0 (dth > alpha implies dth - alpha > 0 in floating point), so with
-    # tau = 0 the limit is pen*inf = inf and the clip returns dw exactly; outside contact the
-    # limit is not used
-    lim = (abs(dth) - alpha) * inv_tau
-    g = (1.0 - hc) + hck * (abs(dth) - alpha)
-    tc = spring + c * g * min(max(dw, -lim), lim)
-    clamped = max(tc, 0.0) if dth > alpha else (min(tc, 0.0) if dth < -alpha else 0.0)
+    pen = abs(dth) - alpha
+    jump = inv_tau == _INF
+    # the jump form's closing band [-half, +half] of penetration (0: the exact law)
+    closing = dw > 0.0 if dth > 0.0 else dw < 0.0
+    half = min(hw * abs(dw), 0.5 * alpha) if (jump and closing) else 0.0
+    wgt = 1.0 if pen >= half else (0.0 if pen <= -half else (pen + half) / (half + half))
+    # tau > 0: in contact pen > 0 (dth > alpha implies dth - alpha > 0 in floating point);
+    # outside contact the limit is not used
+    lim = pen * inv_tau
+    g = (1.0 - hc) + hck * max(pen, 0.0)
+    damp = c * g * wgt * dw if jump else c * g * min(max(dw, -lim), lim)
+    tc = spring + damp
+    clamped = (max(tc, 0.0) if dth > alpha - half
+               else (min(tc, 0.0) if dth < -(alpha - half) else 0.0))
     return clamped if (contact and alpha > 0.0) else t
 
 
 @njit(cache=True, error_model="numpy")
 def shaft_torque_array_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw, out):
-    """:func:`shaft_torque_nb` over arrays ``dth[n]``, ``dw[n]`` into ``out[n]`` [N*m]."""
+    """:func:`shaft_torque_nb` (the exact law, ``hw = 0``) over arrays ``dth[n]``, ``dw[n]``
+    into ``out[n]`` [N*m]."""
     for i in range(dth.shape[0]):
-        out[i] = shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth[i], dw[i])
+        out[i] = shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth[i], dw[i], 0.0)
 
 
 def shaft_torque(dth: np.ndarray, dw: np.ndarray, kL: float, alpha: float, c: float,

@@ -256,10 +256,11 @@ _NAN = np.nan
 
 @njit(cache=True, forceinline=True, error_model="numpy")
 def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, locked, extras,
-           xn2, tfh):
+           xn2, tfh, hw):
     """Time derivatives of (theta_m, w_m, i, theta_L, w_L, xI) for one lane (bristle torque
     ``tf_b``, held voltage ``uh``, notch state ``xn2`` and the friction observer's held bristle
-    torque ``tfh`` given). ``prm`` is the lane's :class:`LaneParams`."""
+    torque ``tfh`` given; ``hw`` = dt/2, the jump contact's regularisation, see
+    ``model.transmission.shaft_torque_nb``). ``prm`` is the lane's :class:`LaneParams`."""
     q_pos = prm.q_pos if extras else 0.0  # no quantisers (a constant at each call site)
     q_speed = prm.q_speed if extras else 0.0
     th_meas, w_meas = sensors_nb(th_l, w_m, prm.d4, prm.d3, q_pos, q_speed, prm.inv_qp,
@@ -277,7 +278,7 @@ def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, l
         u = deadzone_inverse_nb(u, prm.dzi, prm.dzib)
     u_amp = 0.0 if locked else dead_zone_nb(u, prm.d1)
     t_shaft = shaft_torque_nb(prm.kl, prm.alpha, prm.c, prm.contact, prm.inv_tau, prm.hc,
-                              prm.hck, th_m * prm.inv_m - th_l, w_m * prm.inv_m - w_l)
+                              prm.hck, th_m * prm.inv_m - th_l, w_m * prm.inv_m - w_l, hw)
     di = armature_rate_nb(i, w_m, u_amp, prm.r_a, prm.inv_l, prm.ke, prm.sat3)
     dxi = 0.0 if disc else integral_rate_nb(e_w, u_unsat, prm.sat2)
     dw_m = motor_accel_nb(i, w_m, t_shaft, tf_b + visc * w_m, prm.kt, prm.bm, prm.inv_m,
@@ -430,8 +431,9 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     if extras:
         u_out = deadzone_inverse_nb(u_out, lp.dzi, lp.dzib)
     u_amp = dead_zone_nb(u_out, lp.d1)
+    hw = 0.5 * dt  # the jump contact's regularisation band (model.transmission)
     t_shaft = shaft_torque_nb(lp.kl, lp.alpha, lp.c, lp.contact, lp.inv_tau, lp.hc, lp.hck,
-                              th_m * lp.inv_m - th_l, w_m * lp.inv_m - w_l)
+                              th_m * lp.inv_m - th_l, w_m * lp.inv_m - w_l, hw)
     # --- metrics (trapezoid weights over the full-resolution samples)
     e = r0 - th_l
     ev = rv - w_l
@@ -470,18 +472,18 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     x_i = x_i_next
     h = dt
     a1, b1, c1, d1, e1, f1 = _rates(th_m, w_m, i, th_l, w_l, x_i, r0, l0, lp, tf_b, visc,
-                                    uh, disc, locked, extras, xn2, tfh)
+                                    uh, disc, locked, extras, xn2, tfh, hw)
     a2, b2, c2, d2, e2, f2 = _rates(th_m + 0.5 * h * a1, w_m + 0.5 * h * b1,
                                     i + 0.5 * h * c1, th_l + 0.5 * h * d1,
                                     w_l + 0.5 * h * e1, x_i + 0.5 * h * f1, r1, l1, lp,
-                                    tf_b, visc, uh, disc, locked, extras, xn2, tfh)
+                                    tf_b, visc, uh, disc, locked, extras, xn2, tfh, hw)
     a3, b3, c3, d3, e3, f3 = _rates(th_m + 0.5 * h * a2, w_m + 0.5 * h * b2,
                                     i + 0.5 * h * c2, th_l + 0.5 * h * d2,
                                     w_l + 0.5 * h * e2, x_i + 0.5 * h * f2, r1, l1, lp,
-                                    tf_b, visc, uh, disc, locked, extras, xn2, tfh)
+                                    tf_b, visc, uh, disc, locked, extras, xn2, tfh, hw)
     a4, b4, c4, d4, e4, f4 = _rates(th_m + h * a3, w_m + h * b3, i + h * c3, th_l + h * d3,
                                     w_l + h * e3, x_i + h * f3, r2, l2, lp, tf_b, visc,
-                                    uh, disc, locked, extras, xn2, tfh)
+                                    uh, disc, locked, extras, xn2, tfh, hw)
     h6 = h / 6.0
     th_m += h6 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
     w_m += h6 * (b1 + 2.0 * b2 + 2.0 * b3 + b4)

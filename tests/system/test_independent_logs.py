@@ -38,17 +38,19 @@ def test_converged_far_below_the_noise(law: str) -> None:
 
 # -- (b) cross-check against ema's kernel -------------------------------------------------------
 # max |generator - ema| / RMS over [0, 0.5] s, chirp of the battery. ema steps RK4 at 1e-5 s on
-# the command sampled every 1e-4 s. The jump law's torque jump falls on ema's first step in
-# contact (up to one step late per impact), and ema's current limit switches on its step grid
-# (and clamps i after each step), where the generator locates both by events. Measured over
-# 0.5 s (theta_load, omega_motor): default jump 9.2e-5, 5.9e-4; ramp 4.4e-6, 6.7e-5;
-# large_alpha jump 8.6e-5, 4.0e-4; ramp 6.9e-6, 4.1e-5; current_limit (ramp) 2.7e-5, 1.5e-4.
+# the command sampled every 1e-4 s. ema's current limit switches on its step grid (and clamps
+# i after each step), where the generator locates it by events. The jump law's torque jump is
+# spread by ema over the one step centred on the touch (model.transmission, hw = dt/2), where
+# the generator locates the touch by an event; before that band the jump fell on ema's first
+# RK4 stage in contact (default 9.2e-5, 5.9e-4; large_alpha 8.6e-5, 4.0e-4). Measured over
+# 0.5 s (theta_load, omega_motor): default jump 4.6e-6, 6.4e-5; ramp 4.4e-6, 6.7e-5;
+# large_alpha jump 6.8e-6, 4.0e-5; ramp 6.9e-6, 4.1e-5; current_limit (ramp) 2.7e-5, 1.5e-4.
 # Hunt-Crossley (ema: contact_hc = 1, contact_tau = 0, contact_pen = the generator's pen_ref):
 # default 5.2e-6, 1.1e-4; large_alpha 3.2e-6, 5.5e-5 (no jump: as close as the ramp law).
-# Tolerances: 3-5x those.
-XCHECK = [("default", "jump", 5e-4, 2e-3), ("default", "ramp", 3e-5, 3e-4),
+# Tolerances: 3-7x those.
+XCHECK = [("default", "jump", 3e-5, 3e-4), ("default", "ramp", 3e-5, 3e-4),
           ("default", "hunt_crossley", 3e-5, 4e-4), ("large_alpha", "hunt_crossley", 3e-5, 2e-4),
-          ("large_alpha", "jump", 5e-4, 2e-3), ("large_alpha", "ramp", 3e-5, 2e-4),
+          ("large_alpha", "jump", 3e-5, 2e-4), ("large_alpha", "ramp", 3e-5, 2e-4),
           ("current_limit", "ramp", 1e-4, 6e-4)]
 
 
@@ -74,12 +76,12 @@ def test_current_limit_is_reached_and_held() -> None:
 
 
 # Whole 4 s logs (slow tier). Measured theta_load max |diff| / RMS, first second and worst of
-# 1-4 s: ramp 7e-6 .. 4.5e-5 and up to 3.2e-2 (small_alpha multisine, 2-3 s); jump 2.8e-4 ..
-# 1.3e-2 and up to 0.14 (large_alpha). Later in a log the impacts drift apart in time (the
-# load flies free in the gap, so a timing difference grows), and the drift is ema's step: it
-# falls as ema's dt is refined (test below).
-FIRST_S_TOL = {"ramp": 2e-4, "jump": 5e-2}
-LATER_TOL = {"ramp": 0.1, "jump": 0.4}
+# 1-4 s: ramp 7e-6 .. 4.5e-5 and up to 3.2e-2 (small_alpha multisine, 2-3 s); jump 6.9e-6 ..
+# 8.8e-5 and up to 2.3e-2 (small_alpha; before the jump band: 2.8e-4 .. 1.3e-2 and up to
+# 0.14). Later in a log the impacts drift apart in time (the load flies free in the gap, so a
+# timing difference grows), and the drift is ema's step: it falls as ema's dt is refined.
+FIRST_S_TOL = {"ramp": 2e-4, "jump": 3e-4}
+LATER_TOL = {"ramp": 0.1, "jump": 0.1}
 
 
 @pytest.mark.slow
@@ -93,11 +95,13 @@ def test_agrees_with_ema_over_4_s(case: str, law: str) -> None:
 
 @pytest.mark.slow
 def test_disagreement_is_emas_step() -> None:
-    """large_alpha, jump law, 4 s: the worst 1 s window of |generator - ema| / RMS falls from
-    0.142 at ema's dt = 1e-5 s to 0.011 at 2.5e-6 s (measured; asserted: at least 4x)."""
+    """large_alpha, jump law, 4 s: the worst 1 s window of |generator - ema| / RMS is 3.5e-3
+    at ema's dt = 1e-5 s and 1.15e-3 at 2.5e-6 s (measured; before the jump band 0.142 and
+    0.011). Asserted: below 1e-2 at 1e-5 s, and at least 2x smaller at 2.5e-6 s."""
     truth, exc = CASE["large_alpha"]
     r = ema_step_study(truth, "jump", exc, 4.0, dts=(1e-5, 2.5e-6))
-    assert max(r[2.5e-6]) < max(r[1e-5]) / 4, r
+    assert max(r[1e-5]) < 1e-2, r
+    assert max(r[2.5e-6]) < max(r[1e-5]) / 2, r
 
 
 # -- the contact laws by hand -------------------------------------------------------------------

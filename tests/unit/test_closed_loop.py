@@ -80,12 +80,13 @@ def test_batched_jacobian_matches_one_sided_differences(clean):
     # column (the paper form: 0.17 %); the contact's kinks (entry, the end of the damping ramp,
     # the no-pull clamp) leave ~1 % of non-smoothness at this scale, and no more
     assert _fd_mismatch(problem, x, j, 3e-4) < 0.03
-    # the jump form (contact_tau = 0, the damping torque jumps at each impact) on the same log
-    # is not differentiable at this scale: the two differences disagree by 48 % (measured;
-    # 87 % at 1e-3, 240 % at 3e-5), the reason for the ramp (docs/model.md §2)
+    # the jump form (contact_tau = 0, the damping torque jumps at each impact) on the same log:
+    # the simulator spreads the jump over the step centred on the touch (docs/model.md §2), so
+    # it is as differentiable as the ramp: 1.3 % (measured; 48 % before that band, 87 % at
+    # 1e-3, 240 % at 3e-5, where a contact moving across the step grid moved the output)
     jump, _ = build_problem(ClosedLoopSettings(plant={"contact_tau": 0.0}, free_contact=False),
                             as_log(clean))
-    assert _fd_mismatch(jump, x, j, 3e-4) > 0.3
+    assert _fd_mismatch(jump, x, j, 3e-4) < 0.03
 
 
 def test_noise_free_log_gives_the_truth(clean):

@@ -24,7 +24,7 @@ def _shaft_torque(p, dth, dw):
     return shaft_torque_nb(p[INDEX["kL"]], p[INDEX["alpha"]], p[INDEX["c"]],
                            p[INDEX["damping"]] == 0.0, inverse_tau(p[INDEX["contact_tau"]]),
                            p[INDEX["contact_hc"]],
-                           hc_gain(p[INDEX["contact_hc"]], p[INDEX["contact_pen"]]), dth, dw)
+                           hc_gain(p[INDEX["contact_hc"]], p[INDEX["contact_pen"]]), dth, dw, 0.0)
 
 
 def _bristle_step(p, z, w, dt):
@@ -49,7 +49,7 @@ def test_array_torque_equals_scalar_torque():
         for tau in (0.0, 1e-4):
             arr = shaft_torque(dth, dw, 590.0, 0.003, 0.8, form, tau)
             ref = [shaft_torque_nb(590.0, 0.003, 0.8, form == "contact", inverse_tau(tau),
-                                   0.0, 0.0, a, b) for a, b in zip(dth, dw, strict=True)]
+                                   0.0, 0.0, a, b, 0.0) for a, b in zip(dth, dw, strict=True)]
             assert np.array_equal(arr, np.array(ref))
 
 
@@ -74,6 +74,40 @@ def test_hunt_crossley_share():
     # continuous at contact entry: at pen -> 0 the HC torque -> 0 whatever the closing speed
     tiny = shaft_torque(np.array([a + 1e-12]), np.array([5.0]), kL, a, c, "contact", 0.0, 1.0)
     assert abs(tiny[0]) < 1e-8
+
+
+def test_jump_contact_band_by_hand():
+    # tau = 0 with hw > 0 (the kernel passes dt/2): on a closing contact the damping's weight
+    # rises linearly across |pen| <= hw*|dw|, pushing only; opening and tau > 0 are untouched
+    kL, a, c, hw = 590.0, 0.003, 0.8, 5e-6
+    inf = inverse_tau(0.0)
+
+    def tq(dth, dw, inv_tau=inf, h=hw):
+        return shaft_torque_nb(kL, a, c, True, inv_tau, 0.0, 0.0, dth, dw, h)
+
+    dw = 2.0  # closing on the + side: half band 1e-5 rad
+    half = hw * dw
+    assert tq(a - 1.0001 * half, dw) == 0.0  # before the band: the gap
+    assert tq(a - 0.5 * half, dw) == pytest.approx(c * 0.25 * dw, rel=1e-12)  # damping only
+    assert tq(a, dw) == pytest.approx(c * 0.5 * dw, rel=1e-12)  # half weight at the touch
+    assert tq(a + 0.5 * half, dw) == pytest.approx(kL * 0.5 * half + c * 0.75 * dw, rel=1e-12)
+    assert tq(a + 2 * half, dw) == kL * (2 * half) + c * dw  # past the band: the exact law
+    # - side, closing (dw < 0): the mirror image
+    assert tq(-a, -dw) == pytest.approx(-c * 0.5 * dw, rel=1e-12)
+    assert tq(-(a + 2 * half), -dw) == -(kL * (2 * half) + c * dw)
+    # opening: the exact jump law (no band), clamped so that it never pulls
+    assert tq(a - 0.5 * half, -dw) == 0.0
+    assert tq(a + 0.5 * half, -dw) == max(kL * 0.5 * half - c * dw, 0.0)
+    # the band is at most alpha/2 (the two sides never meet)
+    assert tq(0.4 * a, 1e6) == 0.0
+    assert tq(0.5 * a + 1e-12, 1e6) > 0.0
+    # hw = 0 and tau > 0: the unregularised law, bit for bit
+    rng = np.random.default_rng(5)
+    for dth, w in zip(rng.normal(0, 0.005, 300), rng.normal(0, 1.0, 300), strict=True):
+        assert tq(dth, w, h=0.0) == shaft_torque(np.array([dth]), np.array([w]), kL, a, c,
+                                                 "contact", 0.0)[0]
+        assert tq(dth, w, inverse_tau(1e-4)) == shaft_torque(
+            np.array([dth]), np.array([w]), kL, a, c, "contact", 1e-4)[0]
 
 
 @pytest.mark.parametrize(("u", "d", "expected"), [

@@ -142,6 +142,25 @@ def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
     assert set(js["not_determined"]) == {"kL", "alpha", "Fc", "sigma2"}
 
 
+def test_a_noise_free_log_is_judged_on_its_floor():
+    """Noise-free data: every channel's scale is the floor (1e-4 of its range). Those channels
+    are judged too, so a model that cannot explain the log (the load inertia 30 % high) is not
+    confirmed vacuously, and the reason says the scale is the floor."""
+    syn = closed_loop_log({}, 0.0, 0, duration_s=1.0)
+    log = _log(syn)  # the load angle alone: its noise-free scale is the floor
+    log = ClosedLoopLog(log.t, log.theta_ref, {"theta_load_deg": log.channels["theta_load_deg"]},
+                        "synthetic", 0.0, log.truth)
+    settings = ClosedLoopSettings(plant={"JL": 0.013}, free_contact=False, polish=False,
+                                  shooting={"starts": 2, "max_iter": 10, "lengthen_s": []},
+                                  profile_points=5)
+    fit = run_closed_loop(settings, log)
+    assert fit.scale_notes["theta_load_deg"].startswith("0.0001 x range")
+    js = fit.to_json()
+    assert js["optimum"]["confirmed"] is False
+    why = " ".join(js["optimum"]["not_confirmed_because"])
+    assert "1e-4 of its range" in why, why
+
+
 def test_the_worst_windows_are_where_the_residuals_are():
     """The verdict names where a channel fits worst: residuals of 1 everywhere, 3 on the
     samples of the third 0.2 s window of the current: that window first, at 3x."""
