@@ -74,7 +74,10 @@ def fit_one(path: Path, plant: dict, starts: int) -> dict:
                      "stage_iterations")),
                  "kL_step_shift": (js.get("shooting", {}).get("step_shift") or {}).get("kL"),
                  "kL_segment_shift": (js.get("shooting", {}).get("segment_shift")
-                                      or {}).get("kL")}
+                                      or {}).get("kL"),
+                 "timings_s": json.dumps({k: round(v, 2) for k, v in {
+                     **js.get("timings_s", {}),
+                     **js.get("shooting", {}).get("timings_s", {})}.items()})}
     for j, n in enumerate(fit.names):
         if n not in NAMES:
             continue
@@ -99,6 +102,7 @@ def summarise(df: pd.DataFrame) -> str:
         flagged = ~d["confirmed"].to_numpy(bool)
         misses = ~within
         cover = np.mean([d[f"{n}_covered"].to_numpy(bool) for n in NAMES])
+        all_cov = np.all([d[f"{n}_covered"].to_numpy(bool) for n in NAMES], axis=0)
         conf = d["confirmed"].to_numpy(bool)
         cover_c = (np.mean([d[f"{n}_covered"].to_numpy(bool)[conf] for n in NAMES])
                    if conf.any() else float("nan"))
@@ -107,6 +111,12 @@ def summarise(df: pd.DataFrame) -> str:
             f"- within tolerance: {int(within.sum())} of {len(d)}",
             f"- misses flagged (optimum not confirmed): {int((misses & flagged).sum())} of "
             f"{int(misses.sum())}; hits flagged: {int((within & flagged).sum())}",
+            f"- misses not flagged whose 95 % intervals all contain the truth: "
+            f"{int((misses & ~flagged & all_cov).sum())}; with an interval that excludes it "
+            f"(a confident wrong number): {int((misses & ~flagged & ~all_cov).sum())}",
+            *(["- median 95 % half-width: " + ", ".join(
+                f"{n} {d[f'{n}_halfwidth_pct'].median():.2f} %" for n in NAMES)]
+              if f"{NAMES[0]}_halfwidth_pct" in d else []),
             f"- 95 % intervals covering the truth: {100 * cover:.1f} % of "
             f"{len(d) * len(NAMES)} estimates; of the confirmed fits' estimates: "
             f"{100 * cover_c:.1f} % of {int(conf.sum()) * len(NAMES)}",
