@@ -342,6 +342,12 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     hw = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)[prim]
     res.agree = 1 + int(x_runner is not None and
                         bool(np.all(np.abs(x_runner[prim] - x_best_coarse[prim]) <= hw)))
+    if res.agree < 2 and x_runner is not None:
+        # two optima the search cannot choose between: the intervals (printed with "not
+        # determined") span both, each with the estimate's half-widths, not the best alone
+        hw_all = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)
+        unc_ms.ci_low = np.minimum(unc_ms.ci_low, x_runner - hw_all)
+        unc_ms.ci_high = np.maximum(unc_ms.ci_high, x_runner + hw_all)
     if res.agree < 2:
         def seg(r: ShootingSearch) -> str:
             return f"{r.lengths[-1]:g} s" if r.lengths else "the search's"

@@ -142,6 +142,34 @@ def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
     assert set(js["not_determined"]) == {"kL", "alpha", "Fc", "sigma2"}
 
 
+def test_a_runner_up_that_disagrees_widens_the_intervals_to_both(monkeypatch):
+    """When the runner-up start ends outside the estimate's intervals, the optimum is not
+    confirmed and every interval spans both optima (each with the estimate's half-width):
+    the runner-up's kL moved 50 % away by hand (far outside the estimate's own interval)."""
+    import ema_cli.identify.shooting_fit as sf
+
+    real = sf.lengthen_both
+    moved = {}
+
+    def fake(*a, **k):
+        res, runner, shift, won = real(*a, **k)
+        runner.x = runner.x.copy()
+        runner.x[0] *= 1.5  # kL
+        moved["kL"] = float(runner.x[0])
+        return res, runner, shift, won
+
+    monkeypatch.setattr(sf, "lengthen_both", fake)
+    syn = closed_loop_log({}, 1.0, 0, duration_s=0.5)
+    settings = ClosedLoopSettings(free_contact=False, polish=False, profile_points=5,
+                                  shooting={"starts": 2, "max_iter": 10, "lengthen_s": [0.1]})
+    js = run_closed_loop(settings, _log(syn)).to_json()
+    assert js["optimum"]["confirmed"] is False
+    lo, hi = js["parameters"]["kL"]["ci95"]
+    assert lo < js["parameters"]["kL"]["value"] < hi
+    assert lo < moved["kL"] < hi, (lo, hi, moved)
+    assert "kL" in js["not_determined"]
+
+
 def test_a_noise_free_log_is_judged_on_its_floor():
     """Noise-free data: every channel's scale is the floor (1e-4 of its range). Those channels
     are judged too, so a model that cannot explain the log (the load inertia 30 % high) is not
