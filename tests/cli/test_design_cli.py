@@ -5,6 +5,7 @@ unconfirmed fit gives INCONCLUSIVE (exit 3) whatever the batteries say."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ from ema_cli.api.design import corners, design_verdict, fitted_tune_document, sp
 from ema_cli.cli.main import app
 from ema_cli.config.design import EXIT_CODES
 from ema_cli.errors import EmaError
+from ema_cli.identify.closed_loop import MIN_POSITIVE
 
 ROOT = Path(__file__).resolve().parents[2]
 LOG = str(ROOT / "experiments" / "logs" / "design_hc_1pct.csv")
@@ -146,7 +148,9 @@ def test_end_to_end_tiny_and_inconclusive(tmp_path, monkeypatch):
     for c in cases[1:]:
         for n, side in c["sides"].items():
             lo, hi = ident[n]["ci95"]
-            want = max(lo, free[n][0]) if side == "low" else min(hi, free[n][1])
+            # (and to the positive floor of the parameters that must stay positive)
+            want = (max(lo, free[n][0], MIN_POSITIVE.get(n, -math.inf)) if side == "low"
+                    else min(hi, free[n][1]))
             assert c["parameters"][n] == pytest.approx(want, rel=1e-12, abs=1e-12)
     assert set(js["tuning"]["gains_after"]) == {"Kpp", "Kps", "Kis", "fb_motor"}
     for sub in ("identification/fitted.yaml", "tune/tuned.yaml",
