@@ -127,7 +127,8 @@ JUDGED_NOTES = (NOISE_NOTE, FLOOR_NOTE)
 noise-free data) are judged; a scale given by hand is the user's and is not. A noise-free
 log's channels sit on the floor: judging them too keeps a fit of such a log from being
 confirmed vacuously (measured: an independent steps log with 0.007 % noise, every channel on
-the floor, "confirmed" at kL -2.6 % with its segments fitting 1.8 x the floor)."""
+the floor, "confirmed" at kL -2.6 % with its segments fitting the motor speed at
+2.55 x and the current at 2.2 x the floor)."""
 
 
 def too_high(ratios: dict[str, float], notes: dict[str, str],
@@ -339,15 +340,14 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     # the runner-up agrees when, carried through the same lengthening, it ends within the
     # estimate's interval half-widths of the best one (both at the search's step)
     prim = [j for j, n in enumerate(problem.names) if n not in nuisance]
-    hw = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)[prim]
+    hw = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)
     res.agree = 1 + int(x_runner is not None and
-                        bool(np.all(np.abs(x_runner[prim] - x_best_coarse[prim]) <= hw)))
+                        bool(np.all(np.abs(x_runner[prim] - x_best_coarse[prim]) <= hw[prim])))
     if res.agree < 2 and x_runner is not None:
         # two optima the search cannot choose between: the intervals (printed with "not
         # determined") span both, each with the estimate's half-widths, not the best alone
-        hw_all = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)
-        unc_ms.ci_low = np.minimum(unc_ms.ci_low, x_runner - hw_all)
-        unc_ms.ci_high = np.maximum(unc_ms.ci_high, x_runner + hw_all)
+        unc_ms.ci_low = np.minimum(unc_ms.ci_low, x_runner - hw)
+        unc_ms.ci_high = np.maximum(unc_ms.ci_high, x_runner + hw)
     if res.agree < 2:
         def seg(r: ShootingSearch) -> str:
             return f"{r.lengths[-1]:g} s" if r.lengths else "the search's"

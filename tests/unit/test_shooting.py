@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ema_cli.identify.closed_loop import CHANNELS, ClosedLoopLog
+from ema_cli.identify.closed_loop import CHANNELS, FLOOR_NOTE, ClosedLoopLog
 from ema_cli.identify.closed_loop_fit import build_problem, run_closed_loop
 from ema_cli.identify.log_settings import ClosedLoopSettings
 from ema_cli.identify.synthetic_logs import closed_loop_log
@@ -182,7 +182,7 @@ def test_a_noise_free_log_is_judged_on_its_floor():
                                   shooting={"starts": 2, "max_iter": 10, "lengthen_s": []},
                                   profile_points=5)
     fit = run_closed_loop(settings, log)
-    assert fit.scale_notes["theta_load_deg"].startswith("0.0001 x range")
+    assert fit.scale_notes["theta_load_deg"] == FLOOR_NOTE
     js = fit.to_json()
     assert js["optimum"]["confirmed"] is False
     why = " ".join(js["optimum"]["not_confirmed_because"])
