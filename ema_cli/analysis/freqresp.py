@@ -28,9 +28,11 @@ from ema_cli.units import DEG
 
 SAMPLES_PER_PERIOD = 200  # recorded samples per period of the reference [-]
 HARMONICS = 10  # highest harmonic in the distortion [-]
-SETTLE_PERIODS = 3  # settling before the measurement, at least [periods]
-SETTLE_S = 0.3  # settling before the measurement, at least [s]
-MEASURE_PERIODS = 4  # measured periods [periods]
+SETTLE_S = 0.5  # settling before the measured period [s]
+CHANGE_TOL = 1e-3  # the response changed more than this from the period before: run longer [-]
+CHECK_FROM = 0.8  # ... the period before, when it starts after this share of SETTLE_S [-]
+SETTLE_PERIODS = 3  # the longer run: settle max(this many periods, SETTLE_S) ... [periods]
+MEASURE_PERIODS = 4  # ... and measure this many [periods]
 LIMIT_TOL = 1e-9  # a limit counts as reached within this relative margin [-]
 _COL = {c.name: k for k, c in enumerate(SIGNALS)}
 
@@ -47,6 +49,7 @@ class FreqPoint:
     thd_pct: float
     limits: tuple[str, ...]
     diverged: bool
+    periods: int = 1  # measured periods: 1, or MEASURE_PERIODS after a longer run
 
 
 def snap_frequency(f_hz: float, dt: float) -> tuple[float, int, int]:
@@ -61,13 +64,15 @@ def snap_frequency(f_hz: float, dt: float) -> tuple[float, int, int]:
 
 
 def sinestream_steps(freqs_hz: Sequence[float], dt: float, n_cases: int = 1) -> float:
-    """The integration steps of a sinestream (cases x steps, summed over the frequencies),
-    computed before any run: each frequency settles max(3 periods, 0.3 s) and measures 4."""
+    """The integration steps of a sinestream at most (cases x steps, summed over the
+    frequencies), computed before any run: each frequency settles 0.6 s and measures one
+    period, and when the response is still changing runs again, settling max(3 periods,
+    0.6 s) and measuring 4 (:func:`_run_frequency`)."""
     total = 0.0
     for f in freqs_hz:
         period_steps = 1.0 / (float(f) * dt)
         settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * float(f)))
-        total += (settle + MEASURE_PERIODS) * period_steps
+        total += SETTLE_S / dt + period_steps + (settle + MEASURE_PERIODS) * period_steps
     return total * n_cases
 
 
@@ -80,27 +85,46 @@ def _bin(y: np.ndarray, k: int) -> complex:
 CHUNK_BYTES = 192 * 2**20  # recorded signals of one kernel call, at most [bytes]
 
 
-def _run_frequency(rows: Sequence[Mapping[str, float]], f_req: float,
-                   make_refs: Callable[[float], list[Any]], index: Sequence[int], dt: float,
-                   parallel: bool) -> tuple[float, np.ndarray, np.ndarray]:
-    """Run case c with the SI parameters ``rows[c]`` on ``make_refs(f)[index[c]]``, ``f`` the
-    frequency ``f_req`` snapped (:func:`snap_frequency`): the settling then the measured
-    periods, in kernel calls of at most :data:`CHUNK_BYTES` of recorded signals (the lanes
-    are independent, so the split changes no bit) -> (snapped frequency [Hz], measured
-    window ``signals[case, sample, col]``, diverged[case])."""
+@dataclass(frozen=True)
+class Window:
+    """The measured window of one case: ``signals[sample, col]`` over ``periods`` whole
+    periods; ``change``, the relative change of the response from the period before the window
+    to the window (:func:`period_change`; NaN where that period was not simulated, inf where
+    the fixed settling was run); whether the case diverged."""
+
+    signals: np.ndarray
+    periods: int
+    change: float
+    diverged: bool
+
+
+def response(sig: np.ndarray, inp: str, periods: int) -> complex:
+    """The first-harmonic response of the load angle to the input signal ``inp`` over
+    ``periods`` whole periods of recorded signals ``sig[sample, col]`` (0 when the load did
+    not move)."""
+    y = _bin(sig[:, _COL["theta_load"]], periods)
+    return y / _bin(sig[:, _COL[inp]], periods) if y else 0j
+
+
+def period_change(before: np.ndarray, window: np.ndarray, inp: str) -> float:
+    """The relative change [-] of the first-harmonic response (:func:`response`) from one
+    period ``before`` to the next, ``window`` (0 when neither moved, inf when only one did)."""
+    h0, h1 = response(before, inp, 1), response(window, inp, 1)
+    if h1 == 0j:
+        return 0.0 if h0 == 0j else math.inf
+    return abs(h1 - h0) / abs(h1)
+
+
+def _simulate(rows: Sequence[Mapping[str, float]], refs: list[Any], index: Sequence[int],
+              dt: float, n_steps: int, dec: int, first: int, n_samples: int,
+              parallel: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Run the cases for ``n_steps`` recording every ``dec`` steps, in kernel calls of at most
+    :data:`CHUNK_BYTES` of recorded signals (the lanes are independent, so the split changes
+    no bit) -> (``signals[case, first:first + n_samples, col]``, diverged[case])."""
     from ema_cli.model.params import to_row
     from ema_cli.sim.runner import simulate_batch
     from ema_cli.sim.tables import N_SIGNALS
 
-    f, dec, spp = snap_frequency(f_req, dt)
-    if dec * spp < 8 * (HARMONICS + 1):
-        raise EmaError(f"{f_req:g} Hz is too fast for dt = {dt:g} s (a period needs "
-                       f"{8 * (HARMONICS + 1)} steps at least)")
-    period_steps = dec * spp
-    settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * f))
-    n_steps = (settle + MEASURE_PERIODS) * period_steps
-    first = settle * spp
-    refs = make_refs(f)
     per_case = (n_steps // dec + 1) * N_SIGNALS * 8
     size = max(1, CHUNK_BYTES // per_case)
     windows, diverged = [], []
@@ -108,9 +132,54 @@ def _run_frequency(rows: Sequence[Mapping[str, float]], f_req: float,
         P = np.array([to_row(r) for r in rows[a:a + size]])
         res = simulate_batch(P, refs, np.asarray(index[a:a + size], dtype=np.int64), dt,
                              n_steps, dec, parallel=parallel)
-        windows.append(res.signals[:, first:first + MEASURE_PERIODS * spp])
+        windows.append(res.signals[:, first:first + n_samples])
         diverged.append(res.diverged)
-    return f, np.concatenate(windows), np.concatenate(diverged)
+    return np.concatenate(windows), np.concatenate(diverged)
+
+
+def _run_frequency(rows: Sequence[Mapping[str, float]], f_req: float,
+                   make_refs: Callable[[float], list[Any]], index: Sequence[int], dt: float,
+                   parallel: bool, inp: str) -> tuple[float, list[Window]]:
+    """Run case c with the SI parameters ``rows[c]`` on ``make_refs(f)[index[c]]``, ``f`` the
+    frequency ``f_req`` snapped (:func:`snap_frequency`) -> (snapped frequency [Hz], each
+    case's measured :class:`Window`; ``inp``, the input signal's column, for the check).
+
+    Every case settles :data:`SETTLE_S` (the closed loop's transients decay in time, not in
+    periods) and one period is measured. Where the settling's last fifth (:data:`CHECK_FROM`)
+    holds a whole period (f >= 5 / SETTLE_S), the response over that period is compared with
+    the measured one: a case whose response changed by more than :data:`CHANGE_TOL` is still
+    settling, or is not periodic at
+    the input's period (a limit cycle, stick-slip), and runs again from the start, settling
+    max(:data:`SETTLE_PERIODS` periods, SETTLE_S) and measuring :data:`MEASURE_PERIODS`. Each
+    case is decided on its own, so its window is the same in any batch. A case that diverged
+    keeps its first run (the second would repeat it, longer)."""
+    f, dec, spp = snap_frequency(f_req, dt)
+    if dec * spp < 8 * (HARMONICS + 1):
+        raise EmaError(f"{f_req:g} Hz is too fast for dt = {dt:g} s (a period needs "
+                       f"{8 * (HARMONICS + 1)} steps at least)")
+    refs = make_refs(f)
+    first = math.ceil(SETTLE_S / (dec * dt) - 1e-9)  # samples
+    # the period before the window is compared with it when it starts late in the settling
+    lead = spp if first - spp >= CHECK_FROM * first else 0
+    sig, div = _simulate(rows, refs, index, dt, (first + spp) * dec, dec, first - lead,
+                         lead + spp, parallel)
+    out: list[Window | None] = [None] * len(rows)
+    redo = []
+    for c in range(len(rows)):
+        win = sig[c, lead:]
+        change = period_change(sig[c, :lead], win, inp) if lead else math.nan
+        if div[c] or not change > CHANGE_TOL:  # NaN (not checked) passes
+            out[c] = Window(win, 1, change, bool(div[c]))
+        else:
+            redo.append(c)
+    if redo:
+        settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * f - 1e-9))
+        sig, div = _simulate([rows[c] for c in redo], refs, [index[c] for c in redo], dt,
+                             (settle + MEASURE_PERIODS) * dec * spp, dec, settle * spp,
+                             MEASURE_PERIODS * spp, parallel)
+        for k, c in enumerate(redo):
+            out[c] = Window(sig[k], MEASURE_PERIODS, math.inf, bool(div[k]))
+    return f, [w for w in out if w is not None]
 
 
 def _check_positive(values: Sequence[float], what: str, unit: str) -> list[float]:
@@ -144,29 +213,29 @@ def sinestream_units(units: Sequence[Mapping[str, float]], amplitudes_deg: Seque
     out: dict[tuple[int, int, int], FreqPoint] = {}
     for j, f_req in enumerate(freqs):
         report("frequencies", j, len(freqs))
-        f, win, diverged = _run_frequency(
+        f, wins = _run_frequency(
             rows, f_req, lambda f: [InputSignal(kind="sine", amplitude=a * DEG, freq=f)
-                                    for a in amps], index, dt, parallel)
+                                    for a in amps], index, dt, parallel, "theta_ref")
         for c, p in enumerate(rows):
             u, i = divmod(c, len(amps))
-            sig = win[c]
-            y = sig[:, _COL["theta_load"]]
-            y1 = _bin(y, MEASURE_PERIODS)
-            h = y1 / _bin(sig[:, _COL["theta_ref"]], MEASURE_PERIODS)
+            w = wins[c]
+            y = w.signals[:, _COL["theta_load"]]
+            y1 = _bin(y, w.periods)
+            h = y1 / _bin(w.signals[:, _COL["theta_ref"]], w.periods)
             moved = abs(h) > 0.0  # a load that never leaves a dead band has no response
             out[(u, i, j)] = FreqPoint(amps[i], f, 20.0 * math.log10(abs(h)) if moved
                                        else -math.inf,
                                        math.degrees(math.atan2(h.imag, h.real)) if moved
-                                       else math.nan, _thd(y, y1), _limits(p, sig),
-                                       bool(diverged[c]))
+                                       else math.nan, _thd(y, y1, w.periods),
+                                       _limits(p, w.signals), w.diverged, w.periods)
     return [_unwrap([out[(u, i, j)] for i in range(len(amps)) for j in range(len(freqs))],
                     len(freqs)) for u in range(len(units))]
 
 
-def _thd(y: np.ndarray, y1: complex) -> float:
-    """Total harmonic distortion of ``y`` [%] (harmonics 2..HARMONICS of the measured
-    window's fundamental ``y1``)."""
-    harm = [_bin(y, MEASURE_PERIODS * k) for k in range(2, HARMONICS + 1)]
+def _thd(y: np.ndarray, y1: complex, periods: int) -> float:
+    """Total harmonic distortion of ``y`` [%] (harmonics 2..HARMONICS of the fundamental
+    ``y1`` of the measured window, ``periods`` periods long)."""
+    harm = [_bin(y, periods * k) for k in range(2, HARMONICS + 1)]
     return 100.0 * math.sqrt(sum(abs(x) ** 2 for x in harm)) / abs(y1) if y1 else math.inf
 
 
@@ -181,6 +250,7 @@ class CompliancePoint:
     thd_pct: float
     limits: tuple[str, ...]
     diverged: bool
+    periods: int = 1  # measured periods: 1, or MEASURE_PERIODS after a longer run
 
     @property
     def stiffness(self) -> float:
@@ -214,17 +284,18 @@ def compliance_units(units: Sequence[Mapping[str, float]], amplitude_nm: float,
     got: dict[tuple[int, float], CompliancePoint] = {}
     for j, (f_req, us) in enumerate(who.items()):
         report("frequencies", j, len(who))
-        f, win, diverged = _run_frequency(
+        f, wins = _run_frequency(
             [units[u] for u in us], f_req,
             lambda f: [InputSignal(kind="step", amplitude=0.0, load_sine=(amp, f))],
-            [0] * len(us), dt, parallel)
+            [0] * len(us), dt, parallel, "torque_load")
         for c, u in enumerate(us):
-            sig = win[c]
-            y = sig[:, _COL["theta_load"]]
-            y1 = _bin(y, MEASURE_PERIODS)
-            z = y1 / _bin(sig[:, _COL["torque_load"]], MEASURE_PERIODS)
-            got[(u, f_req)] = CompliancePoint(f, z, _thd(y, y1), _limits(units[u], sig),
-                                              bool(diverged[c]))
+            w = wins[c]
+            y = w.signals[:, _COL["theta_load"]]
+            y1 = _bin(y, w.periods)
+            z = y1 / _bin(w.signals[:, _COL["torque_load"]], w.periods)
+            got[(u, f_req)] = CompliancePoint(f, z, _thd(y, y1, w.periods),
+                                              _limits(units[u], w.signals), w.diverged,
+                                              w.periods)
     return [[got[(u, f)] for f in fs] for u, fs in enumerate(asks)]
 
 
@@ -253,7 +324,7 @@ def _unwrap(points: list[FreqPoint], n_freq: int) -> list[FreqPoint]:
         ok = np.isfinite(phase)  # NaN where the load did not move: left out of the unwrapping
         phase[ok] = np.degrees(np.unwrap(np.radians(phase[ok])))
         out += [FreqPoint(p.amplitude_deg, p.f_hz, p.gain_db, float(ph), p.thd_pct, p.limits,
-                          p.diverged) for p, ph in zip(block, phase, strict=True)]
+                          p.diverged, p.periods) for p, ph in zip(block, phase, strict=True)]
     return out
 
 

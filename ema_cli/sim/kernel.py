@@ -12,12 +12,12 @@ innermost) and every time step is one loop over the lanes whose body is branch-f
 ``min``/``max``, the ``model.vmath`` functions), so the compiler vectorises it (AVX-512: 8 lanes
 per instruction). Chunks are spread over the cores with ``prange``. The time loop of a chunk
 is compiled once per kernel variant (:func:`variant_codes`: with or without friction, with the
-default Stribeck exponent 1 or any other, with or without the digital controller, quantisers,
-locked motor and compensators), each a function of its own that carries only what its lanes
-need. The variant is a compile-time argument of the entry points, so a variant is compiled
-(or loaded from the cache) only when a batch first needs it; the runner sorts a batch's rows by
-variant (:func:`variant_order`, :func:`variant_keys`) and calls each variant's entry point for
-its rows.
+default Stribeck exponent 1 or any other, with or without the digital controller, quantisers
+and compensators; the locked motor is a select in all), each a function of its own that
+carries only what its lanes need. The variant is a compile-time argument of the entry points,
+so a variant is compiled (or loaded from the cache) only when a batch first needs it; the
+runner sorts a batch's rows by variant (:func:`variant_order`, :func:`variant_keys`) and calls
+each variant's entry point for its rows.
 One configuration is a chunk of one lane: the same code, so a batch equals its single runs bit
 for bit, and the serial and the parallel entry points give identical results (no fast-math, no
 reassociation).
@@ -285,9 +285,9 @@ def _rates(th_m, w_m, i, th_l, w_l, x_i, r, t_prof, prm, tf_b, visc, uh, disc, l
                           prm.inv_jm)
     dw_l = load_accel_nb(w_l, t_shaft, load_torque_nb(th_l, prm.t_const, t_prof, prm.k_h),
                          prm.bl, prm.inv_jl)
-    if locked:
-        return 0.0, 0.0, 0.0, w_l, dw_l, 0.0
-    return w_m, dw_m, di, w_l, dw_l, dxi
+    # locked motor: the motor side keeps its state (selects, so every variant vectorises)
+    return ((0.0 if locked else w_m), (0.0 if locked else dw_m), (0.0 if locked else di), w_l,
+            dw_l, (0.0 if locked else dxi))
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -374,12 +374,13 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     (reference at t, t+dt/2, t+dt, its velocity at t, load profile at t, t+dt/2, t+dt); lp =
     :func:`_lane_params` (a :class:`LaneParams`). ``fric`` (:func:`variant_codes`) 0 skips the
     LuGre update (no lane has friction), 1 takes the Stribeck exponent as 1; ``extras`` False
-    skips the digital controller, the quantisers, the locked motor and the compensators (none
-    is in use); both are constants at each call site, so a variant carries only what it needs.
+    skips the digital controller, the quantisers and the compensators (none is in use; the
+    locked motor is a select in every variant); both are constants at each call site, so a
+    variant carries only what it needs.
     Returns (x+, acc+, ctl+, (u_dem, u_amp, T, Tf, T_load) at t_k).
     """
-    ns = lp.ns if extras else 0.0  # no digital controller, locked motor nor quantisers
-    locked = lp.locked if extras else False  # (constants at each call site)
+    ns = lp.ns if extras else 0.0  # no digital controller nor quantisers (a constant at each
+    locked = lp.locked  # call site); the locked motor: selects in every variant
     q_pos = lp.q_pos if extras else 0.0
     q_speed = lp.q_speed if extras else 0.0
     delta = 1.0 if fric == 1 else lp.delta  # fric 1: every lane's exponent (pow_nb folds)
@@ -519,10 +520,11 @@ def _advance(W, k, dt, n_steps, in_ss, in_osc, record, fric_chunk, extras):
 @njit(cache=True, forceinline=True, error_model="numpy")
 def _lane_needs(W, j):
     """What lane ``j`` of ``W`` (rows: model.params order first) needs of the kernel: (friction,
-    Stribeck exponent 1, extras: the digital controller, a quantiser, the locked motor or a
-    compensator). The one definition :func:`variant_codes` and :func:`variant_order` use."""
+    Stribeck exponent 1, extras: the digital controller, a quantiser or a compensator; the
+    locked motor runs in every variant). The one definition :func:`variant_codes` and
+    :func:`variant_order` use."""
     extras = (W[_TS, j] > 0.0 or W[_QPOS, j] > 0.0 or W[_QSPEED, j] > 0.0
-              or W[_LOCKED, j] != 0.0 or W[_DZI, j] > 0.0 or W[_FFC, j] > 0.0
+              or W[_DZI, j] > 0.0 or W[_FFC, j] > 0.0
               or W[_FFS2, j] > 0.0 or W[_NHZ, j] > 0.0 or W[_FFSIG0, j] > 0.0)
     return W[_FRIC, j] != 0.0, W[_DELTA, j] == 1.0, extras
 

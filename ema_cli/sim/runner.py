@@ -279,7 +279,7 @@ def simulate_batch(
     n_calls = -(-(n_steps + 1) // chunk)
     n_out = n_steps // dec + 1 if dec > 0 else 0
     # the rows sorted by the kernel variant they need (friction and its exponent; digital
-    # controller, quantisers, locked motor, compensators): each variant's rows are run by that
+    # controller, quantisers, compensators): each variant's rows are run by that
     # variant's entry point (compiled the first time it is needed), in chunks of their own;
     # each row writes its results straight into its own row of sig and met (out_row)
     order = variant_order(P)

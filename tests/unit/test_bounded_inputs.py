@@ -21,11 +21,14 @@ runner = CliRunner()
 
 
 def test_the_sinestream_estimate_is_hand_arithmetic():
-    # 1 Hz at dt 1e-3: 1000 steps a period, max(3, ceil(0.3)) + 4 = 7 periods -> 7000 steps;
-    # 0.1 Hz: 10000 steps a period, 7 periods -> 70000; two amplitudes double it
-    assert sinestream_steps([1.0, 0.1], 1e-3, 2) == pytest.approx(2 * (7000 + 70000))
-    # 100 Hz: 0.3 s of settling is 30 periods: (30 + 4) x 10 steps at dt 1e-3
-    assert sinestream_steps([100.0], 1e-3) == pytest.approx(340)
+    # at most: 0.6 s of settling and one period, then (when the response still changes) a
+    # run settling max(3 periods, 0.6 s) and measuring 4 periods. 1 Hz at dt 1e-3: 600 + 1000,
+    # then max(3, ceil(0.6)) + 4 = 7 periods -> 7000 steps; 0.1 Hz: 600 + 10000, then 7
+    # periods -> 70000; two amplitudes double it
+    assert sinestream_steps([1.0, 0.1], 1e-3, 2) == pytest.approx(
+        2 * (1600 + 7000 + 10600 + 70000))
+    # 100 Hz: 600 + 10, then 0.6 s of settling is 60 periods: (60 + 4) x 10 steps
+    assert sinestream_steps([100.0], 1e-3) == pytest.approx(610 + 640)
 
 
 def test_check_steps_refuses_above_the_cap_naming_what_and_how():
@@ -36,7 +39,7 @@ def test_check_steps_refuses_above_the_cap_naming_what_and_how():
 
 
 def test_a_frequency_response_down_to_a_microhertz_is_refused_before_it_runs():
-    with pytest.raises(EmaError, match=r"frequency response from 1e-06 Hz .* about 4\.59e\+12 "
+    with pytest.raises(EmaError, match=r"frequency response from 1e-06 Hz .* about 5\.25e\+12 "
                                        r"integration steps.*raise f_min_hz"):
         freqresp(f_min_hz=1e-6)
     r = runner.invoke(app, ["freqresp", "--f-min", "1e-6", "--out", "/nonexistent/x"])
