@@ -15,6 +15,7 @@ batch. Units: SI inside, degrees and Hz in the results (``FreqPoint``).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -76,10 +77,18 @@ def sinestream_steps(freqs_hz: Sequence[float], dt: float, n_cases: int = 1) -> 
     return total * n_cases
 
 
+@functools.lru_cache(maxsize=4096)
+def _kernel(n: int, k: int) -> np.ndarray:
+    """``exp(-2 pi i k j / n)``, j = 0..n-1 (read-only: shared by every call)."""
+    e = np.exp(-2j * math.pi * k * np.arange(n) / n)
+    e.flags.writeable = False
+    return e
+
+
 def _bin(y: np.ndarray, k: int) -> complex:
     """The DFT bin of ``k`` cycles per ``len(y)`` samples, as a complex amplitude."""
     n = len(y)
-    return 2.0 / n * complex(np.dot(y, np.exp(-2j * math.pi * k * np.arange(n) / n)))
+    return 2.0 / n * complex(np.dot(y, _kernel(n, k)))
 
 
 CHUNK_BYTES = 192 * 2**20  # recorded signals of one kernel call, at most [bytes]
