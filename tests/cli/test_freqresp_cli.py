@@ -32,7 +32,9 @@ def test_freqresp_writes_everything(tmp_path):
     for a in data["amplitudes"]:
         rows = table[table["amplitude_deg"] == a["amplitude_deg"]]
         bw = crossing(rows["f_hz"].to_numpy(), rows["gain_db"].to_numpy(), -3.0)
-        assert a["f_3db_hz"] == pytest.approx(bw, rel=1e-9)
+        # the CSV holds 9 significant digits (%.9g): the crossing re-read from it agrees to
+        # about that (a gain 5e-9 dB off moves a 6 Hz crossing by ~1e-8 of itself)
+        assert a["f_3db_hz"] == pytest.approx(bw, rel=1e-7)
         assert set(a) >= {"f_3db_hz", "f_minus90_hz", "peak_db", "f_peak_hz", "limits"}
     # at 20 deg the 800 deg/s rate limit binds near the bandwidth: reported with its limit
     assert "sat1" in data["amplitudes"][1]["limits"]

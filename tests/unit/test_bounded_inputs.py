@@ -21,14 +21,14 @@ runner = CliRunner()
 
 
 def test_the_sinestream_estimate_is_hand_arithmetic():
-    # at most: 0.6 s of settling and one period, then (when the response still changes) a
-    # run settling max(3 periods, 0.6 s) and measuring 4 periods. 1 Hz at dt 1e-3: 600 + 1000,
-    # then max(3, ceil(0.6)) + 4 = 7 periods -> 7000 steps; 0.1 Hz: 600 + 10000, then 7
+    # at most: 0.5 s of settling and one period, then (when the response still changes) a
+    # run settling max(3 periods, 0.5 s) and measuring 4 periods. 1 Hz at dt 1e-3: 500 + 1000,
+    # then max(3, ceil(0.5)) + 4 = 7 periods -> 7000 steps; 0.1 Hz: 500 + 10000, then 7
     # periods -> 70000; two amplitudes double it
     assert sinestream_steps([1.0, 0.1], 1e-3, 2) == pytest.approx(
-        2 * (1600 + 7000 + 10600 + 70000))
-    # 100 Hz: 600 + 10, then 0.6 s of settling is 60 periods: (60 + 4) x 10 steps
-    assert sinestream_steps([100.0], 1e-3) == pytest.approx(610 + 640)
+        2 * (1500 + 7000 + 10500 + 70000))
+    # 100 Hz: 500 + 10, then 0.5 s of settling is 50 periods: (50 + 4) x 10 steps
+    assert sinestream_steps([100.0], 1e-3) == pytest.approx(510 + 540)
 
 
 def test_check_steps_refuses_above_the_cap_naming_what_and_how():
