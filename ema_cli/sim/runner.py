@@ -53,6 +53,11 @@ from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
 __all__ = ["KERNEL_KEY", "BatchResult", "load_kernel", "simulate", "simulate_batch"]
 
 LANE_MIN_CASES = 4  # per thread: below this many cases, the one-lane path is faster [cases]
+EXTRAS_LANES = 1
+"""The lane width of the rows that need the kernel's extras variant (digital controller,
+quantisers, compensators) whatever width the batch asked: that variant's branches keep the
+compiler from vectorising it, and it ran at 5.3 M lane-steps/s per core in 16 lanes against
+7.6 M one lane at a time (``Ts > 0``, 2026-11-26). The results are the same bit for bit."""
 TIME_CHUNK = 2**14  # steps per kernel call; the references are sampled per call [steps]
 """Measured on 2 cores: sampling a reference costs the least per step at 2**14-2**15 steps (its
 arrays stay in cache): a step input 5-8 ns/step, 4-6x less than at 2**16 or in one piece, a sine
@@ -252,7 +257,8 @@ def simulate_batch(
     for this grid, or a :class:`Reference` sampled for the whole grid. ``dec`` > 0 records
     signals every ``dec`` steps. ``parallel`` spreads the chunks over numba threads; ``lanes``
     is 1 (each configuration alone) or :data:`kernel.LANES` (chunks in SIMD lanes), default
-    :func:`lanes_for`. ``progress(fraction)`` is called after each time chunk with the fraction
+    :func:`lanes_for`; rows that need the extras variant run one lane at a time either way
+    (:data:`EXTRAS_LANES`). ``progress(fraction)`` is called after each time chunk with the fraction
     of the steps done. Results are bit-identical whatever ``parallel``, ``lanes`` and
     :data:`TIME_CHUNK` are. Raises EmaError when the recorded signals would not fit in memory
     (:func:`check_memory`).
@@ -284,14 +290,18 @@ def simulate_batch(
     # each row writes its results straight into its own row of sig and met (out_row)
     order = variant_order(P)
     key = variant_keys(variant_codes(P[order]), lanes)  # sorted: each variant's rows contiguous
-    parts = []  # (variant args, first row, end row, state shape) in sorted order
+    parts = []  # (variant args, lane width, first row, end row, state shape) in sorted order
     for v in np.unique(key):
         rows_v = np.flatnonzero(key == v)
         a, b = int(rows_v[0]), int(rows_v[-1]) + 1
-        groups = (b - a) if lanes == 1 else -(-(b - a) // LANES)
-        shape = (groups if n_calls > 1 else 0, N_ROWS, lanes)
-        parts.append(((int(v % 3), bool(v // 3)), a, b, shape))
-    check_memory(n_cases, n_out, sum(math.prod(p[3]) for p in parts))
+        fric, extras = int(v % 3), bool(v // 3)
+        width = lanes
+        if extras and lanes == LANES:  # the extras variant does not vectorise: one lane at a
+            width, fric = EXTRAS_LANES, (2 if fric else 0)  # time is faster (EXTRAS_LANES)
+        groups = (b - a) if width == 1 else -(-(b - a) // LANES)
+        shape = (groups if n_calls > 1 else 0, N_ROWS, width)
+        parts.append(((fric, extras), width, a, b, shape))
+    check_memory(n_cases, n_out, sum(math.prod(p[4]) for p in parts))
     sig = np.full((n_cases, n_out, N_SIGNALS), np.nan)
     met = np.empty((n_cases, N_METRICS))
     identity = bool(np.all(order == np.arange(n_cases)))
@@ -300,12 +310,12 @@ def simulate_batch(
     out_row = np.ascontiguousarray(order, dtype=np.int64)
     calls = []
     load_s = 0.0
-    for (fric, extras), a, b, shape in parts:
-        load_s += load_kernel(parallel, lanes, fric, extras)  # 0 when loaded already
-        kernel = entry_point(parallel, lanes, fric, extras)
+    for (fric, extras), width, a, b, shape in parts:
+        load_s += load_kernel(parallel, width, fric, extras)  # 0 when loaded already
+        kernel = entry_point(parallel, width, fric, extras)
         state = np.empty(shape)
         # lanes of the state that hold a real row (the rest repeat the first row of a chunk)
-        real = (np.arange(shape[0])[:, None] * lanes + np.arange(lanes)[None, :]) < (b - a)
+        real = (np.arange(shape[0])[:, None] * width + np.arange(width)[None, :]) < (b - a)
         calls.append((kernel, fric, extras, np.ascontiguousarray(Pk[a:b]), state,
                       np.ascontiguousarray(qk[a:b]), np.ascontiguousarray(out_row[a:b]), real))
     kernel_s = 0.0
