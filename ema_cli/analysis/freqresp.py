@@ -66,13 +66,13 @@ def snap_frequency(f_hz: float, dt: float) -> tuple[float, int, int]:
 
 def sinestream_steps(freqs_hz: Sequence[float], dt: float, n_cases: int = 1) -> float:
     """The integration steps of a sinestream at most (cases x steps, summed over the
-    frequencies), computed before any run: each frequency settles 0.6 s and measures one
-    period, and when the response is still changing runs again, settling max(3 periods,
-    0.6 s) and measuring 4 (:func:`_run_frequency`)."""
+    frequencies), computed before any run: each frequency settles :data:`SETTLE_S` and
+    measures one period, and when the response is still changing runs again, settling
+    max(3 periods, SETTLE_S) and measuring 4 (:func:`_run_frequency`)."""
     total = 0.0
     for f in freqs_hz:
         period_steps = 1.0 / (float(f) * dt)
-        settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * float(f)))
+        settle = max(SETTLE_PERIODS, math.ceil(SETTLE_S * float(f) - 1e-9))
         total += SETTLE_S / dt + period_steps + (settle + MEASURE_PERIODS) * period_steps
     return total * n_cases
 

@@ -197,7 +197,7 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
 
     import numpy as np
 
-    from ema_cli.analysis.freqresp import sinestream, sinestream_steps
+    from ema_cli.analysis.freqresp import SETTLE_S, sinestream, sinestream_steps
     from ema_cli.analysis.linear import linear_model
     from ema_cli.config.loader import load_config, resolve_run
     from ema_cli.config.study import StudyConfig
@@ -223,8 +223,9 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
     check_steps(sinestream_steps(f, dt, len(amps)),
                 f"frequency response from {f_min_hz:g} Hz at dt_s = {dt:g} s ({len(amps)} "
                 f"amplitudes x {n} frequencies)",
-                "raise f_min_hz (a frequency measures a whole period after 0.6 s, and "
-                "settles 3 periods and measures 4 when its response is still changing), or use "
+                f"raise f_min_hz (a frequency measures a whole period after {SETTLE_S:g} s, "
+                "and settles 3 periods and measures 4 when its response is still changing), "
+                "or use "
                 "fewer frequencies or amplitudes, or a larger simulation.dt_s")
     t0 = time.perf_counter()
     points = sinestream(params, amps, f, dt=cfg.simulation.dt_s)

@@ -379,8 +379,8 @@ def _step(x, acc, ctl, inp, lp, k, dt, n_steps, in_ss, in_osc, fric, extras):
     variant carries only what it needs.
     Returns (x+, acc+, ctl+, (u_dem, u_amp, T, Tf, T_load) at t_k).
     """
-    ns = lp.ns if extras else 0.0  # no digital controller nor quantisers (a constant at each
-    locked = lp.locked  # call site); the locked motor: selects in every variant
+    ns = lp.ns if extras else 0.0  # no digital controller (a constant at each call site)
+    locked = lp.locked  # the locked motor: selects, in every variant
     q_pos = lp.q_pos if extras else 0.0
     q_speed = lp.q_speed if extras else 0.0
     delta = 1.0 if fric == 1 else lp.delta  # fric 1: every lane's exponent (pow_nb folds)

@@ -294,10 +294,9 @@ def simulate_batch(
     for v in np.unique(key):
         rows_v = np.flatnonzero(key == v)
         a, b = int(rows_v[0]), int(rows_v[-1]) + 1
-        fric, extras = int(v % 3), bool(v // 3)
-        width = lanes
-        if extras and lanes == LANES:  # the extras variant does not vectorise: one lane at a
-            width, fric = EXTRAS_LANES, (2 if fric else 0)  # time is faster (EXTRAS_LANES)
+        extras = bool(v // 3)
+        width = EXTRAS_LANES if extras else lanes  # the extras variant does not vectorise
+        fric = int(variant_keys(np.array([v]), width)[0] % 3)  # that width's friction variant
         groups = (b - a) if width == 1 else -(-(b - a) // LANES)
         shape = (groups if n_calls > 1 else 0, N_ROWS, width)
         parts.append(((fric, extras), width, a, b, shape))
