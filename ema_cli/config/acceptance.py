@@ -255,24 +255,25 @@ class ThresholdTest(_Test):
 
 
 class HysteresisTest(_Test):
-    """A slow triangle command (0 -> +A -> -A -> 0 per period), measured on the last cycle."""
+    """A slow triangle command (0 -> +A in a quarter period, then +A -> -A -> +A per period),
+    measured on the last period."""
 
     METRICS: ClassVar[dict[str, str]] = {"hysteresis": "angle", "free_play": "angle"}
 
     test: Literal["hysteresis"]
     amplitude_deg: PositiveFloat = 2.0
     period_s: PositiveFloat = Field(8.0, le=MAX_DURATION_S)
-    cycles: PositiveInt = Field(2, ge=2, le=10)
+    cycles: PositiveInt = Field(1, ge=1, le=10)
 
     @model_validator(mode="after")
     def _length(self) -> HysteresisTest:
-        if self.period_s * self.cycles > MAX_DURATION_S:
-            raise ValueError(f"period_s x cycles = {self.period_s * self.cycles:g} s is longer "
+        if self.sim_seconds() > MAX_DURATION_S:
+            raise ValueError(f"period_s x (cycles + 1/4) = {self.sim_seconds():g} s is longer "
                              f"than {MAX_DURATION_S:g} s")
         return self
 
     def sim_seconds(self) -> float:
-        return self.period_s * self.cycles
+        return self.period_s * (self.cycles + 0.25)
 
     def spans(self) -> list[tuple[str, float, int]]:
         return [("period_s", self.period_s / 4, MIN_STEPS)]  # a quarter period: one ramp

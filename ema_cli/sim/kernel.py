@@ -142,6 +142,7 @@ _M_RMS_VEL = MET["rms_vel"]
 _M_SETTLING_TIME = MET["settling_time"]
 _M_SS_ERR_POS = MET["ss_err_pos"]
 _M_T50 = MET["t50"]
+_M_STEP_PEAK = MET["step_peak"]
 _M_T_END = MET["t_end"]
 
 # Rows of a chunk's work array W[_N_ROWS, lanes] (one array, so that the compiler sees constant
@@ -792,6 +793,7 @@ def _finish_metrics(W, n_real, dt, n_steps, k_ss, met, rows):
             out[_M_OVERSHOOT] = max(0.0, W[_A_SMAX, j] - 1.0) * 100.0
             out[_M_RISE_TIME] = W[_A_T90, j] - W[_A_T10, j]
             out[_M_T50] = W[_A_T50, j] - t_step
+            out[_M_STEP_PEAK] = W[_A_SMAX, j]
             last_out = W[_A_LAST, j]
             out[_M_SETTLING_TIME] = ((last_out + 1.0) * dt - t_step if last_out < n_steps
                                          else _NAN)
@@ -799,6 +801,7 @@ def _finish_metrics(W, n_real, dt, n_steps, k_ss, met, rows):
             out[_M_OVERSHOOT] = _NAN
             out[_M_RISE_TIME] = _NAN
             out[_M_T50] = _NAN
+            out[_M_STEP_PEAK] = _NAN
             out[_M_SETTLING_TIME] = _NAN
 
 

@@ -65,6 +65,8 @@ METRICS: tuple[Column, ...] = (
     _col("settling_time", "s", "settling_time_s", 1.0,
          "2 % settling time after the step (NaN: not settled by the end)"),
     _col("t50", "s", "t50_s", 1.0, "time to 50 % of the step (lag)"),
+    _col("step_peak", "-", "step_peak", 1.0,
+         "largest share of the step the load reached after it (1 + overshoot, not clipped)"),
     _col("p2p_pos", "rad", "p2p_err_pos_deg", 1 / DEG,
          "peak-to-peak position error over the last 20 % (residual oscillation)"),
     _col("p2p_vel", "rad/s", "p2p_err_vel_deg_s", 1 / DEG,

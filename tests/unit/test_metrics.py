@@ -36,6 +36,7 @@ def oracle(t, ref, y, e, ev, cur, u, wl, T, step, t0):
     s = y / step
     after = t >= t0
     out["overshoot"] = max(0.0, s[after].max() - 1) * 100
+    out["step_peak"] = s[after].max()
     first = lambda lvl: t[after][np.argmax(s[after] >= lvl)]  # noqa: E731
     out["rise_time"] = first(0.9) - first(0.1)
     out["t50"] = first(0.5) - t0
@@ -62,9 +63,23 @@ def test_online_metrics_equal_numpy_on_full_resolution(over):
 
 def test_step_metrics_are_nan_for_non_step_inputs():
     res = run_rows([resolve({})], InputSignal("sine", 1 * DEG, freq=2.0), duration=0.2)
-    for name in ("overshoot", "rise_time", "settling_time", "t50"):
+    for name in ("overshoot", "rise_time", "settling_time", "t50", "step_peak"):
         assert math.isnan(res.metrics[0, MET[name]])
     assert res.metrics[0, MET["iae_pos"]] > 0
+
+
+@pytest.mark.parametrize(("over", "step", "low", "high"), [
+    ({"friction": 1}, -0.002 * DEG, 0.05, 0.5), ({"friction": 1}, 0.0005 * DEG, 0.05, 0.5),
+    ({}, 20 * DEG, 1.01, 1.1)])
+def test_step_peak_is_the_largest_share_of_the_step_reached(over, step, low, high):
+    # below the friction threshold the load reaches a small share of the step within 0.1 s
+    # (the threshold test's question); a 20 deg step overshoots (3.8 %): step_peak is
+    # max(theta_L/step) over every step, not clipped like the overshoot, signed steps alike
+    res = run_rows([resolve(over)], InputSignal("step", step), duration=0.1 if over else 0.3,
+                   dt=1e-5, output_interval=1e-5)
+    share = res.signals[0][:, SIG["theta_load"]] / step
+    assert res.metrics[0, MET["step_peak"]] == np.max(share)  # the same samples: exact
+    assert low < np.max(share) < high
 
 
 def test_edge_units_in_metrics_frame():
