@@ -20,6 +20,7 @@ import re
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Any
 
 PACKAGE = Path(__file__).resolve().parent
 KEYED_FOLDERS = ("model", "sim")  # every module in these is read by the compiled kernels
@@ -80,7 +81,16 @@ def _prepare(root: Path, key: str) -> Path:
 CACHE_KEY = source_key()
 """The key of the sources this process runs; the compiled code is cached under it."""
 
-from numba import config, literally, njit, prange  # noqa: E402  (after the key: config must be set first)
+from numba import config, literally, prange  # noqa: E402  (after the key: config must be set first)
+from numba import njit as _njit  # noqa: E402
+
+
+def njit(*args: Any, **kwargs: Any) -> Any:
+    """numba's ``njit`` with fused multiply-adds allowed (``fastmath={"contract"}``, the only
+    fast-math flag: no reassociation, no finite-math assumption; docs/model.md, "Fused
+    multiply-adds"), unless the caller sets ``fastmath``."""
+    kwargs.setdefault("fastmath", {"contract"})
+    return _njit(*args, **kwargs)
 
 config.CACHE_DIR = str(_prepare(cache_root(), CACHE_KEY))
 
