@@ -120,18 +120,27 @@ def covariance_clustered(J: np.ndarray, r: np.ndarray, clusters: Sequence[np.nda
 
     ``clusters`` are index arrays of the residuals (e.g. the samples of every channel in one
     time segment of a log): residuals may be correlated inside a cluster (model error,
-    coloured noise), not across. ``A = J^T J``, ``B = G/(G-1) sum_k (J_k^T r_k)(J_k^T r_k)^T``,
-    cov = ``A^-1 B A^-1``; ``dof = G - 1`` for Student's t (G clusters). Near-null directions
-    of the column-scaled J get an infinite variance, as in :func:`covariance`.
+    coloured noise), not across. The covariance is the delete-one-cluster jackknife's (CR3,
+    MacKinnon and White 1985; Bell and McCaffrey 2002): with ``A = J^T J``, ``A_k`` and
+    ``g_k = J_k^T r_k`` cluster k's share of A and its score, leaving cluster k out moves the
+    (Gauss-Newton) estimate by ``d_k = (A - A_k)^-1 g_k`` (exactly, for a linear model), and
+    ``cov = (G-1)/G sum_k d_k d_k^T``. The plain sandwich ``A^-1 (sum_k g_k g_k^T) A^-1``
+    (CR1) understates the variance of a parameter that few clusters carry (a high-leverage
+    cluster fits its own residuals); CR3 does not. ``dof = G - 1`` for Student's t (G
+    clusters). Near-null directions of the column-scaled J get an infinite variance, as in
+    :func:`covariance`.
     """
     G = len(clusters)
 
     def meat(Js: np.ndarray) -> np.ndarray:
-        B = np.zeros((J.shape[1], J.shape[1]))
+        A = Js.T @ Js
+        B = np.zeros_like(A)
         for idx in clusters:
-            sc = Js[idx].T @ r[idx]
-            B += np.outer(sc, sc)
-        return B * (G / max(G - 1, 1))
+            Jk = Js[idx]
+            d = np.linalg.lstsq(A - Jk.T @ Jk, Jk.T @ r[idx], rcond=None)[0]
+            g = A @ d  # A^-1 B A^-1 then sums d_k d_k^T
+            B += np.outer(g, g)
+        return B * ((G - 1) / max(G, 1))
 
     cov, cond = _sandwich(J, meat)
     return cov, cond, max(G - 1, 1)
