@@ -48,10 +48,15 @@ def peak_triangle(amplitude: float, period: float, cycles: int) -> tuple[tuple[f
     return tuple(t), tuple(y)
 
 
+def _last_period(period: float, cycles: int) -> float:
+    """When the measured (last) period of :func:`peak_triangle` starts, at a +A vertex [s]."""
+    return period / 4 + (cycles - 1) * period
+
+
 def _branches(t: np.ndarray, period: float, cycles: int) -> tuple[np.ndarray, np.ndarray]:
     """Masks of the rising and falling command in the last period of :func:`peak_triangle`
     (vertex instants out)."""
-    tau = t - (period / 4 + (cycles - 1) * period)
+    tau = t - _last_period(period, cycles)
     last = (tau > 0) & (tau < period)
     return last & (tau > period / 2), last & (tau < period / 2)
 
@@ -69,8 +74,9 @@ def run_hysteresis(name: str, test: HysteresisTest, units: Sequence[Mapping[str,
 
     A = test.amplitude_deg * DEG
     P = _whole(test.period_s, dt)
-    duration = P / 4 + P * test.cycles
-    sig = InputSignal(kind="csv", table=peak_triangle(A, P, test.cycles), path="triangle")
+    table = peak_triangle(A, P, test.cycles)
+    duration = table[0][-1]  # the last vertex
+    sig = InputSignal(kind="csv", table=table, path="triangle")
     return [_hysteresis_case(name, test, res, k, P)
             for _, res in _simulate(units, [sig], dt, duration,
                                     _interval(P, dt, RECORD_PER_PERIOD))
@@ -92,7 +98,7 @@ def _hysteresis_case(name: str, test: HysteresisTest, res: Any, case: int,
     play = float(np.median(_at_same(y[up], xm[up], y[down], xm[down], ygrid)))
     cond = f"{test.amplitude_deg:g} deg, {4 * test.amplitude_deg / P:.3g} deg/s"
     notes = ["diverged"] if res.diverged[case] else []
-    t0 = P / 4 + (test.cycles - 1) * P  # the measured period's ends: the command at +A
+    t0 = _last_period(P, test.cycles)  # the measured period's ends: the command at +A
     gap = abs(float(np.interp(t0 + P, t, y) - np.interp(t0, t, y)))
     if width > 0 and gap > CLOSURE_SHARE * width:
         notes.append(f"the loop does not close: the load angle at the measured period's end "
