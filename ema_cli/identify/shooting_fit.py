@@ -46,6 +46,7 @@ import numpy as np
 from ema_cli.identify.closed_loop import FLOOR_NOTE, NOISE_NOTE, ClosedLoopProblem
 from ema_cli.identify.shooting_search import (
     AGREE_REL,
+    RESEAT_RATIO,
     ShootingSearch,
     chain_seat,
     lm_many,
@@ -188,10 +189,11 @@ LENGTHEN_ITER = 20  # joint LM iterations at each longer segment length
 
 def continue_at(res: ShootingSearch, dt: float, iterations: int) -> int:
     """Continue the best start at step ``dt`` [s] (in place): re-seated, then joint LM ->
-    the LM iterations used."""
+    the LM iterations used. The states were seated at the search's step, so when the LM
+    stalls only the segments that fit clearly worse than the median one are re-fitted."""
     st = new_state(res.sp, res.V[None], dt)
     st.V, st.R, st.cost = chain_seat(res.sp, st.V, dt)
-    lm_many(res.sp, st, dt, iterations)
+    lm_many(res.sp, st, dt, iterations, stall_ratio=RESEAT_RATIO)
     res.V, res.cost = st.V[0].copy(), float(st.cost[0])
     res.x = res.sp.unpack(res.V)[0]
     return int(st.iterations[0])
@@ -201,7 +203,9 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -
     """Continue the search's best start on segments of ``length`` [s] (in place): each new
     segment starts from the state of the old segment that started at the same sample (the
     nearest before it), chained (:func:`chain_seat`), then joint LM. Kept only if the data
-    cost per sample does not rise by more than 5 %: longer segments leave fewer free states
+    cost per sample does not rise by more than 5 %. When the LM stalls, only the segments
+    that fit clearly worse than the median one are re-fitted (the states come from the
+    converged shorter segments). Longer segments leave fewer free states
     (with one state per 0.05 s the estimator of the parameters is biased on some logs: the
     incidental-parameter problem), but a longer horizon is harder to seat. Returns the LM
     iterations used."""
@@ -216,7 +220,7 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -
     k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
     V2, _, _ = chain_seat(sp2, sp2.pack(x, S[k])[None], dt)
     st = new_state(sp2, V2, dt)
-    lm_many(sp2, st, dt, iterations)
+    lm_many(sp2, st, dt, iterations, stall_ratio=RESEAT_RATIO)
     if st.cost[0] <= 1.05 * res.cost:
         res.sp, res.V, res.cost = sp2, st.V[0].copy(), float(st.cost[0])
         res.x = sp2.unpack(res.V)[0]

@@ -24,6 +24,7 @@ from ema_cli.model.params import to_row
 LM_LAMBDA0 = 1e-3  # initial Levenberg-Marquardt damping of the per-segment state fits [-]
 GAP_STARTS = (-1.0, -0.5, 0.0, 0.5, 1.0)  # starting gap positions q of a state fit [-]
 LOCAL_FIT_HALF = 5  # samples each side of the local quadratic fits of a reconstruction [-]
+PRUNE_AFTER = 3  # state-fit iterations of every start across the gap before the best goes on [-]
 
 
 def _local_fit(t: np.ndarray, y: np.ndarray, at: np.ndarray, half: int = LOCAL_FIT_HALF
@@ -99,24 +100,29 @@ def _data_index(sp: ShootingProblem) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fit_states(sp: ShootingProblem, X: np.ndarray, S0: np.ndarray, group: np.ndarray,
-               dt: float, iterations: int, prune_after: int = 6
-               ) -> tuple[np.ndarray, np.ndarray]:
+               dt: float, iterations: int, prune_after: int = 6,
+               which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The initial state of every segment fitted to its own data for fixed parameters:
     instances ``X[K, p]`` (SI) with starting states ``S0[K, n_seg, NV]``, grouped by
     ``group[K]`` (0..G-1) -> per group and segment the best instance's fit (S [G, n_seg, NV]
     SI, data cost [G, n_seg]). Levenberg-Marquardt with one damping per (instance, segment);
     every instance in the same kernel calls (one for the forward-difference Jacobian, one for
     the trial step, per iteration); after ``prune_after`` iterations only the best instance of
-    each (group, segment) goes on."""
-    K, n = S0.shape[0], S0.shape[1]
+    each (group, segment) goes on. ``which[G, n_seg]`` (bool) fits only those segments of
+    each group: the others are returned as the group's first start with cost inf (a segment
+    fits alone, so the fitted ones are the same as in a fit of all)."""
+    n = S0.shape[1]
     G = int(group.max()) + 1
+    if which is None:
+        which = np.ones((G, n), dtype=bool)
     prms = [sp.base.params(x) for x in X]
     idx, mask = _data_index(sp)
     meas = sp.base.measured  # [n_ch, N]
     scales = sp.base.scales
     sig_v = sp.sigma[list(VAR_STATES)]
-    inst = np.repeat(np.arange(K), n)  # instance of each (instance, segment) lane
-    seg_of = np.tile(np.arange(n), K)
+    # the (instance, segment) lanes: every instance on its group's chosen segments
+    lane_k, lane_s = np.nonzero(which[group])
+    inst, seg_of = lane_k, lane_s
     L = idx.shape[1]
 
     def res(Sflat: np.ndarray, inst_of: np.ndarray, seg_of_: np.ndarray, reps: int
@@ -136,8 +142,8 @@ def fit_states(sp: ShootingProblem, X: np.ndarray, S0: np.ndarray, group: np.nda
         R[div] = FAILED
         return np.where(np.isfinite(R), R, FAILED)
 
-    S = S0.reshape(K * n, NV).copy()
-    lam = np.full(K * n, LM_LAMBDA0)
+    S = S0[inst, seg_of].copy()
+    lam = np.full(inst.shape[0], LM_LAMBDA0)
     cost = np.sum(res(S, inst, seg_of, 1) ** 2, axis=(1, 2))
     h = STATE_FD_REL * sig_v
     pruned = False
@@ -167,19 +173,23 @@ def fit_states(sp: ShootingProblem, X: np.ndarray, S0: np.ndarray, group: np.nda
         lam = np.clip(np.where(better, lam / 3.0, lam * 4.0), 1e-9, 1e9)
     if not pruned:
         S, cost, lam, inst, seg_of = _prune(S, cost, lam, inst, seg_of, group, G, n)
-    # after pruning: lane g*n + k is group g, segment k
-    return S.reshape(G, n, NV), cost.reshape(G, n)
+    # after pruning: one lane per chosen (group, segment)
+    first = np.array([np.flatnonzero(group == g)[0] for g in range(G)])
+    S_out = S0[first].copy()
+    c_out = np.full((G, n), np.inf)
+    S_out[group[inst], seg_of] = S
+    c_out[group[inst], seg_of] = cost
+    return S_out, c_out
 
 
 def _prune(S: np.ndarray, cost: np.ndarray, lam: np.ndarray, inst: np.ndarray,
            seg_of: np.ndarray, group: np.ndarray, G: int, n: int) -> tuple[np.ndarray, ...]:
-    """Keep the best lane of each (group, segment), ordered group-major."""
-    keep = np.empty(G * n, dtype=np.int64)
-    gl = group[inst]
-    for g in range(G):
-        for k in range(n):
-            lanes = np.flatnonzero((gl == g) & (seg_of == k))
-            keep[g * n + k] = lanes[np.argmin(cost[lanes])]
+    """Keep the best lane of each (group, segment) (the first such lane on a tie), ordered
+    group-major."""
+    key = group[inst] * n + seg_of
+    order = np.lexsort((np.arange(key.shape[0]), cost, key))
+    starts = np.r_[True, key[order][1:] != key[order][:-1]]
+    keep = order[starts]
     # each kept lane keeps its own instance's parameters
     return S[keep], cost[keep], lam[keep], inst[keep], seg_of[keep]
 
@@ -218,7 +228,8 @@ def start_states(sp: ShootingProblem, X: np.ndarray, dt: float, iterations: int 
             Xi.append(x)
             starts.append(S0)
             group.append(g)
-    S, _ = fit_states(sp, np.array(Xi), np.array(starts), np.array(group), dt, iterations)
+    S, _ = fit_states(sp, np.array(Xi), np.array(starts), np.array(group), dt, iterations,
+                      prune_after=PRUNE_AFTER)
     V = np.array([sp.pack(x, S[g]) for g, x in enumerate(X)])
     return chain_seat(sp, V, dt)[0]
 
