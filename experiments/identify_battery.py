@@ -3,7 +3,7 @@ independent simulator (experiments/loggen: scipy solve_ivp, the same documented 
 at Latin-hypercube truths, three contact laws, three excitations, two sample rates.
 
     python experiments/identify_battery.py --battery DIR --out DIR [--set stated|unstated|all]
-        [--only 0,3,7] [--starts 8]
+        [--only 0,3] [--starts 8] [--lengthen 0.1,0.2]
 
 Sets: ``stated`` = one log per truth with its contact law stated to the fit (even truths the
 ramp law with its contact_tau, odd truths the jump law, contact_tau = 0; the damping ratio
@@ -49,13 +49,17 @@ def plan(manifest: dict, which: str) -> list[tuple[str, str, dict]]:
     return out
 
 
-def fit_one(path: Path, plant: dict, starts: int) -> dict:
+def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None = None
+            ) -> dict:
     from ema_cli.identify.closed_loop import load_log
     from ema_cli.identify.closed_loop_fit import run_closed_loop
     from ema_cli.identify.log_settings import ClosedLoopSettings
 
     log = load_log(path)
-    settings = ClosedLoopSettings(plant=plant, shooting={"starts": starts}, profile_points=5)
+    shooting: dict = {"starts": starts}
+    if lengthen is not None:
+        shooting["lengthen_s"] = lengthen
+    settings = ClosedLoopSettings(plant=plant, shooting=shooting, profile_points=5)
     t0 = time.perf_counter()
     fit = run_closed_loop(settings, log)
     wall = time.perf_counter() - t0
@@ -143,6 +147,8 @@ def main() -> None:
     ap.add_argument("--set", dest="which", default="all", choices=("stated", "unstated", "all"))
     ap.add_argument("--only", default=None, help="comma-separated truth indices")
     ap.add_argument("--starts", type=int, default=8)
+    ap.add_argument("--lengthen", default=None,
+                    help="comma-separated longer segment lengths [s] (default: the tool's)")
     a = ap.parse_args()
     manifest = json.loads((a.battery / "battery.json").read_text())
     a.out.mkdir(parents=True, exist_ok=True)
@@ -150,6 +156,8 @@ def main() -> None:
     done = pd.read_csv(res_path) if res_path.is_file() else pd.DataFrame()
     seen = set(zip(done["file"], done["set"], strict=True)) if len(done) else set()
     only = None if a.only is None else {int(k) for k in a.only.split(",")}
+    lengthen = (None if a.lengthen is None
+                else [float(v) for v in a.lengthen.split(",") if v.strip()])
     meta = {e["file"]: e for e in manifest["logs"]}
     todo = [(f, s, p) for f, s, p in plan(manifest, a.which)
             if (f, s) not in seen and (only is None or meta[f]["index"] in only)]
@@ -158,7 +166,7 @@ def main() -> None:
         print(f"[{k + 1}/{len(todo)}] {f} ({s})", flush=True)
         row = {"file": f, "set": s, "law": e["law"], "excitation": e["excitation"],
                "rate_hz": e["sample_rate_hz"], "noise_pct": e["noise_pct"],
-               **fit_one(a.battery / f, plant, a.starts)}
+               **fit_one(a.battery / f, plant, a.starts, lengthen)}
         print("   " + ", ".join(f"{n} {row[f'{n}_err_pct']:+.3f} %" for n in NAMES)
               + f"; confirmed {row['confirmed']}; {row['wall_s']:.0f} s", flush=True)
         frame = pd.DataFrame([row])

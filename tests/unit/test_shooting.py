@@ -128,6 +128,37 @@ def test_segments_at_the_truth_fit_to_the_noise_level():
     assert np.max(np.abs(defect)) < 5.0, defect
 
 
+def test_fitting_some_segments_fits_them_as_a_fit_of_all_does():
+    """The state fit of a chosen subset of (start, segment) pairs (the re-seat's suspect
+    segments) returns, for those, exactly the states and costs of a fit of every segment (a
+    segment fits alone: lanes are independent), and the others unfitted (cost inf)."""
+    from ema_cli.identify import shooting_search as ss
+    from ema_cli.identify.shooting_seat import fit_states, reconstruct, state_starts
+
+    syn = closed_loop_log({"kL": 600.0, "alpha": 0.003, "Fc": 0.02, "sigma2": 0.01}, 1.0, 2,
+                          duration_s=0.6)
+    problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
+    x = np.array([syn.truth[n] for n in problem.names])
+    x2 = x * np.array([1.05, 0.9, 1.1, 1.0])
+    sp = ss.build(problem, 0.05, x)
+    X, S0, group = [], [], []
+    for g, xx in enumerate((x, x2)):
+        for s0 in state_starts(sp, xx, [reconstruct(problem, xx, sp.seg.first)]):
+            X.append(xx)
+            S0.append(s0)
+            group.append(g)
+    X, S0, group = np.array(X), np.array(S0), np.array(group)
+    S_all, c_all = fit_states(sp, X, S0, group, 5e-5, 5, prune_after=2)
+    which = np.zeros((2, sp.seg.n), dtype=bool)
+    which[0, [1, 4, 7]] = True
+    which[1, [0, 4, sp.seg.n - 1]] = True
+    S_some, c_some = fit_states(sp, X, S0, group, 5e-5, 5, prune_after=2, which=which)
+    assert np.all(np.isfinite(c_all))
+    np.testing.assert_array_equal(S_some[which], S_all[which])
+    np.testing.assert_array_equal(c_some[which], c_all[which])
+    assert np.all(np.isinf(c_some[~which]))
+
+
 @pytest.fixture(scope="module")
 def short_fit():
     syn = closed_loop_log({"kL": 420.0, "alpha": 0.0055, "Fc": 0.05, "sigma2": 0.02}, 1.0, 3,
