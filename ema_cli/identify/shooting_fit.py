@@ -185,6 +185,10 @@ def ms_uncertainty(res: ShootingSearch, dt: float) -> tuple[Uncertainty, np.ndar
 
 
 LENGTHEN_ITER = 20  # joint LM iterations at each longer segment length
+MIN_SEGMENTS = 10
+"""A lengthening that would leave fewer segments is skipped: the segments are the clusters of
+the jackknife covariance (its t quantile has one degree of freedom fewer than there are
+segments, and its variance estimate is the spread of as many deletions) [-]."""
 
 
 def continue_at(res: ShootingSearch, dt: float, iterations: int) -> int:
@@ -208,12 +212,13 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -
     converged shorter segments). Longer segments leave fewer free states
     (with one state per 0.05 s the estimator of the parameters is biased on some logs: the
     incidental-parameter problem), but a longer horizon is harder to seat. Returns the LM
-    iterations used."""
+    iterations used (0: skipped, as when fewer than :data:`MIN_SEGMENTS` segments would
+    be left)."""
     from ema_cli.identify.shooting import ShootingProblem, make_segments
 
     sp = res.sp
     seg = make_segments(sp.base.log.t, length)
-    if seg.n >= sp.seg.n:
+    if seg.n >= sp.seg.n or seg.n < MIN_SEGMENTS:
         return 0
     sp2 = ShootingProblem(sp.base, seg, sp.sigma)
     x, S = sp.unpack(res.V)
