@@ -88,6 +88,9 @@ class ShootingOutcome:
     step_shift: np.ndarray | None = None  # estimate at dt/2 minus at dt (SI)
     segment_shift: np.ndarray | None = None  # estimate's move at the last lengthening (SI)
     runner_up_won: bool = False  # the runner-up start ended lower on the longest segments
+    segment_prediction: np.ndarray | None = None
+    """The fit itself: every channel as the segments predict it, each segment simulated from
+    its fitted start state, at the estimate [n_ch, n_samples] (SI)."""
 
     def to_json(self) -> dict[str, Any]:
         s = self.search
@@ -383,10 +386,13 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     edge = [n for n in on_bound(problem, res.x) if n not in nuisance]
     if edge:
         reasons.append(f"{', '.join(edge)} on a bound of the search: widen the bounds")
+    n_ch = len(problem.channels)
+    seg_pred = problem.measured - r_ms.reshape(n_ch, -1) * problem.scales[:, None]
     out = ShootingOutcome(res, res.x.copy(), unc_ms, ratios, res.x.copy(), "multiple shooting",
                           confirmed=not reasons, reasons=reasons, timings=timings,
                           step_shift=shift, segment_shift=seg_shift,
-                          stage_iterations=iters, runner_up_won=runner_won)
+                          stage_iterations=iters, runner_up_won=runner_won,
+                          segment_prediction=seg_pred)
     if polish_iter <= 0:
         out.polish = {"kept": False, "why": "no polish (polish: false)"}
         return out

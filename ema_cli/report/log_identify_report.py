@@ -36,7 +36,9 @@ CHANNEL_LABELS = {"theta_load_deg": "load angle", "omega_motor_rpm": "motor spee
 
 
 def channel_figure(fit: ClosedLoopFit, channel: str) -> Figure:
-    """Measured and fitted ``channel`` vs time (top) and the residual (bottom), edge units."""
+    """Measured and fitted ``channel`` vs time (top) and the residual (bottom), edge units.
+    A multiple-shooting fit shows the fit itself (the segments, each from its fitted start
+    state) and the fitted model run from rest over the whole log (a check)."""
     p = fit.problem
     j = p.channels.index(channel)
     f = CHANNELS[channel][1]
@@ -44,15 +46,34 @@ def channel_figure(fit: ClosedLoopFit, channel: str) -> Figure:
     t = p.log.t
     y = p.measured[j] / f
     yh = fit.prediction[j] / f
+    seg = segment_prediction(fit)
     fig, (a0, a1) = subplots(2, 1, figsize=(11, 6.5), sharex=True)
     a0.plot(t, y, ".", color="0.55", ms=1.5, label="measured")
-    a0.plot(t, yh, "C0", lw=0.9, label="fitted model" if fit.shooting is None else
-            "fitted model, run from rest over the whole log (the fit is by segments)")
+    if seg is None:
+        a0.plot(t, yh, "C0", lw=0.9, label="fitted model")
+    else:
+        ys = seg[j] / f
+        n_seg = fit.shooting.search.sp.seg.n
+        a0.plot(t, yh, "C0", lw=0.8, alpha=0.7,
+                label="fitted model run from rest over the whole log (a check)")
+        a0.plot(t, ys, "C1", lw=0.9, label=f"the fit: {n_seg} segments, each simulated from "
+                "its fitted start state")
+        if n_seg <= 40:  # where each segment starts (more would hide the signals)
+            for a in (a0, a1):
+                for k, i in enumerate(fit.shooting.search.sp.seg.first[1:]):
+                    a.axvline(t[i], color="0.8", lw=0.6, zorder=0,
+                              label="segment starts" if (a is a0 and k == 0) else None)
+        rms_run = float(np.sqrt(np.mean((y - yh) ** 2)))
+        a1.plot(t, y - yh, color="C0", lw=0.5, alpha=0.5,
+                label=f"measured − whole-log run (RMS {rms_run:.3g} {unit})")
     a0.set_ylabel(f"{CHANNEL_LABELS[channel]} [{unit}]")
     a0.set_title(f"{CHANNEL_LABELS[channel]}: measured and fitted")
     a0.legend(fontsize=8, loc="upper left")
-    rms = float(np.sqrt(np.mean((y - yh) ** 2)))
-    a1.plot(t, y - yh, color="C2", lw=0.6, label=f"measured − model (RMS {rms:.3g} {unit})")
+    yf = yh if seg is None else seg[j] / f
+    rms = float(np.sqrt(np.mean((y - yf) ** 2)))
+    a1.plot(t, y - yf, color="C2", lw=0.6,
+            label=f"measured − {'model' if seg is None else 'the fit (segments)'} "
+                  f"(RMS {rms:.3g} {unit})")
     scale = p.scales[j] / f
     a1.axhline(scale, color="C3", ls=":", lw=0.9, label=f"±scale s_c = {scale:.3g} {unit}")
     a1.axhline(-scale, color="C3", ls=":", lw=0.9)
@@ -176,14 +197,26 @@ def closed_loop_summary(fit: ClosedLoopFit) -> str:
     return "\n".join(lines)
 
 
+def segment_prediction(fit: ClosedLoopFit) -> np.ndarray | None:
+    """The multiple-shooting fit's own prediction [n_ch, n] (SI), or None (``--method ga``)."""
+    sh = fit.shooting
+    return None if sh is None else sh.segment_prediction
+
+
 def closed_loop_fit_columns(fit: ClosedLoopFit) -> dict[str, np.ndarray]:
     """fit.csv of a closed-loop identification: ``t_s``, then each fitted channel measured and
-    simulated at the fit (``theta_load_deg``, ``theta_load_model_deg``, ...), edge units."""
+    simulated at the fit from rest over the whole log (``theta_load_deg``,
+    ``theta_load_model_deg``, ...) and, for a multiple-shooting fit, as its segments predict
+    it (``theta_load_segments_deg``, ...: the fit itself), edge units."""
     fits = {"t_s": fit.problem.log.t}
+    seg = segment_prediction(fit)
     for j, c in enumerate(fit.problem.channels):
         f = CHANNELS[c][1]
+        stem, unit = c.rsplit("_", 1)
         fits[c] = fit.problem.measured[j] / f
-        fits[f"{c.rsplit('_', 1)[0]}_model_{c.rsplit('_', 1)[1]}"] = fit.prediction[j] / f
+        fits[f"{stem}_model_{unit}"] = fit.prediction[j] / f
+        if seg is not None:
+            fits[f"{stem}_segments_{unit}"] = seg[j] / f
     return fits
 
 

@@ -185,6 +185,28 @@ def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
     assert js["shooting"]["segments"] == 10 and js["shooting"]["lengthened_to_s"] == [0.1]
 
 
+def test_the_fit_itself_is_written_and_drawn_as_the_segments_predict_it(short_fit):
+    """fit.csv carries each channel as the segments predict it (the fit itself) beside the
+    whole-log run: its weighted RMS is the segments' fit quality in identification.json, and
+    the channel figure draws it (measured, whole-log check, the fit)."""
+    from ema_cli.identify.closed_loop import CHANNELS
+    from ema_cli.report.log_identify_report import channel_figure, closed_loop_fit_columns
+
+    _, fit = short_fit
+    js = fit.to_json()
+    cols = closed_loop_fit_columns(fit)
+    p = fit.problem
+    for j, c in enumerate(p.channels):
+        stem, unit = c.rsplit("_", 1)
+        seg = cols[f"{stem}_segments_{unit}"] * CHANNELS[c][1]
+        rms = float(np.sqrt(np.mean(((p.measured[j] - seg) / p.scales[j]) ** 2)))
+        assert rms == pytest.approx(js["shooting"]["segments_rms_over_scale"][c], rel=1e-9)
+        assert not np.allclose(seg, cols[f"{stem}_model_{unit}"] * CHANNELS[c][1])
+    fig = channel_figure(fit, "theta_load_deg")
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert labels[0] == "measured" and any(lb.startswith("the fit: 10 segments") for lb in labels)
+
+
 def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
     """The load inertia fixed 30 % high: the segments cannot reach the noise level, so the
     optimum is not confirmed and no parameter is reported as determined."""
