@@ -108,6 +108,9 @@ def summarise(df: pd.DataFrame) -> str:
         cover = np.mean([d[f"{n}_covered"].to_numpy(bool) for n in NAMES])
         all_cov = np.all([d[f"{n}_covered"].to_numpy(bool) for n in NAMES], axis=0)
         conf = d["confirmed"].to_numpy(bool)
+        # per fit: how many estimates miss their tolerance AND lie outside their interval
+        wrong_and_sure = np.sum([(np.abs(d[f"{n}_err_pct"].to_numpy()) > tol[n])
+                                 & ~d[f"{n}_covered"].to_numpy(bool) for n in NAMES], axis=0)
         cover_c = (np.mean([d[f"{n}_covered"].to_numpy(bool)[conf] for n in NAMES])
                    if conf.any() else float("nan"))
         lines += [f"## law {which} ({len(d)} logs; tolerances " + ", ".join(
@@ -118,6 +121,8 @@ def summarise(df: pd.DataFrame) -> str:
             f"- misses not flagged whose 95 % intervals all contain the truth: "
             f"{int((misses & ~flagged & all_cov).sum())}; with an interval that excludes it "
             f"(a confident wrong number): {int((misses & ~flagged & ~all_cov).sum())}",
+            "- of those, estimates both out of tolerance and outside their own interval: "
+            f"{int(wrong_and_sure[misses & ~flagged & ~all_cov].sum())}",
             *(["- median 95 % half-width: " + ", ".join(
                 f"{n} {d[f'{n}_halfwidth_pct'].median():.2f} %" for n in NAMES)]
               if f"{NAMES[0]}_halfwidth_pct" in d else []),
