@@ -59,10 +59,11 @@ def channel_figure(fit: ClosedLoopFit, channel: str) -> Figure:
         a0.plot(t, ys, "C1", lw=0.9, label=f"the fit: {n_seg} segments, each simulated from "
                 "its fitted start state")
         if n_seg <= 40:  # where each segment starts (more would hide the signals)
+            starts = t[fit.shooting.search.sp.seg.first[1:]]
             for a in (a0, a1):
-                for k, i in enumerate(fit.shooting.search.sp.seg.first[1:]):
-                    a.axvline(t[i], color="0.8", lw=0.6, zorder=0,
-                              label="segment starts" if (a is a0 and k == 0) else None)
+                for ts in starts:
+                    a.axvline(ts, color="0.8", lw=0.6, zorder=0)
+            a0.plot([], [], color="0.8", lw=0.6, label="segment starts")
         rms_run = float(np.sqrt(np.mean((y - yh) ** 2)))
         a1.plot(t, y - yh, color="C0", lw=0.5, alpha=0.5,
                 label=f"measured − whole-log run (RMS {rms_run:.3g} {unit})")
