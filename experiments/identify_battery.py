@@ -3,7 +3,8 @@ independent simulator (experiments/loggen: scipy solve_ivp, the same documented 
 at Latin-hypercube truths, three contact laws, three excitations, two sample rates.
 
     python experiments/identify_battery.py --battery DIR --out DIR [--set stated|unstated|all]
-        [--only 0,3] [--starts 8] [--lengthen 0.1,0.2]
+        [--only 0,3] [--starts 8] [--lengthen 0.1,0.2] [--no-tie]
+        [--command linear|cubic]
 
 Sets: ``stated`` = one log per truth with its contact law stated to the fit (even truths the
 ramp law with its contact_tau, odd truths the jump law, contact_tau = 0; the damping ratio
@@ -49,17 +50,18 @@ def plan(manifest: dict, which: str) -> list[tuple[str, str, dict]]:
     return out
 
 
-def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None = None
-            ) -> dict:
+def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None = None,
+            tie: bool = True, command: str | None = None) -> dict:
     from ema_cli.identify.closed_loop import load_log
     from ema_cli.identify.closed_loop_fit import run_closed_loop
     from ema_cli.identify.log_settings import ClosedLoopSettings
 
     log = load_log(path)
-    shooting: dict = {"starts": starts}
+    shooting: dict = {"starts": starts, "tie_motor_angle": tie}
     if lengthen is not None:
         shooting["lengthen_s"] = lengthen
-    settings = ClosedLoopSettings(plant=plant, shooting=shooting, profile_points=5)
+    extra = {} if command is None else {"command": command}
+    settings = ClosedLoopSettings(plant=plant, shooting=shooting, profile_points=5, **extra)
     t0 = time.perf_counter()
     fit = run_closed_loop(settings, log)
     wall = time.perf_counter() - t0
@@ -154,6 +156,10 @@ def main() -> None:
     ap.add_argument("--starts", type=int, default=8)
     ap.add_argument("--lengthen", default=None,
                     help="comma-separated longer segment lengths [s] (default: the tool's)")
+    ap.add_argument("--no-tie", action="store_true",
+                    help="each segment's motor angle free (shooting.tie_motor_angle: false)")
+    ap.add_argument("--command", default=None, choices=("linear", "cubic"),
+                    help="the command between samples (default: the tool's)")
     a = ap.parse_args()
     manifest = json.loads((a.battery / "battery.json").read_text())
     a.out.mkdir(parents=True, exist_ok=True)
@@ -171,7 +177,8 @@ def main() -> None:
         print(f"[{k + 1}/{len(todo)}] {f} ({s})", flush=True)
         row = {"file": f, "set": s, "law": e["law"], "excitation": e["excitation"],
                "rate_hz": e["sample_rate_hz"], "noise_pct": e["noise_pct"],
-               **fit_one(a.battery / f, plant, a.starts, lengthen)}
+               **fit_one(a.battery / f, plant, a.starts, lengthen, not a.no_tie,
+                        a.command)}
         print("   " + ", ".join(f"{n} {row[f'{n}_err_pct']:+.3f} %" for n in NAMES)
               + f"; confirmed {row['confirmed']}; {row['wall_s']:.0f} s", flush=True)
         frame = pd.DataFrame([row])

@@ -67,6 +67,7 @@ MIN_POSITIVE = {"Fc": 1e-9, "vs": 1e-9, "Jm": 1e-12, "JL": 1e-12}
 """Where a free parameter's bound reaches 0 but the model needs > 0 (LuGre needs Fc, vs > 0;
 inertias > 0), the value simulated is at least this [SI]."""
 ON_GRID_TOL = 1e-6  # a time stamp within 1e-6 steps of the grid is on it [steps]
+COMMAND_SUBSAMPLES = 8  # points per log interval of a cubic command table [-]
 OVERSAMPLE = 2  # record at least this many samples per log interval when interpolating [-]
 MAX_RECORD_BYTES = 2**28  # the record of one population batch at most (else interpolate) [B]
 FAILED_RESIDUAL = 1e6  # weighted residual of a diverged simulation (least-squares polish) [-]
@@ -236,10 +237,36 @@ class ClosedLoopProblem:
     scales: np.ndarray
     dt: float
     ga_dt: float
+    command: str = "linear"
     evaluations: int = 0
     kernel_steps: int = 0
     kernel_s: float = 0.0
     _refs: dict = field(default_factory=dict, repr=False)
+
+    def command_table(self, a: int = 0, b: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The command between log samples ``a`` and ``b`` (inclusive; default the whole log)
+        as a table the simulator interpolates linearly -> (t [s], theta_ref [rad]).
+        ``command`` linear: the samples themselves; cubic: a not-a-knot cubic spline through
+        every sample of the log, tabulated at :data:`COMMAND_SUBSAMPLES` points per
+        interval (a smooth command known only at its samples: the chord of a linear table
+        misses a chirp at 8 Hz sampled at 1 kHz by up to 3e-4 of its amplitude, the spline
+        by 2e-8)."""
+        lg = self.log
+        b = lg.n - 1 if b is None else b
+        tt = lg.t[a:b + 1]
+        if self.command == "linear" or lg.n < 4 or tt.shape[0] < 2:
+            return tt, lg.theta_ref[a:b + 1]
+        if "spline" not in self._refs:
+            from scipy.interpolate import CubicSpline
+
+            self._refs["spline"] = CubicSpline(lg.t, lg.theta_ref)
+        frac = np.arange(COMMAND_SUBSAMPLES) / COMMAND_SUBSAMPLES
+        td = np.concatenate([(tt[:-1, None] + np.diff(tt)[:, None] * frac[None]).ravel(),
+                             tt[-1:]])
+        rd = self._refs["spline"](td)
+        k = np.arange(0, td.shape[0], COMMAND_SUBSAMPLES)
+        rd[k] = lg.theta_ref[a:b + 1]  # the samples exactly
+        return td, rd
 
     def params(self, x: np.ndarray) -> dict[str, float]:
         """The complete SI parameters of one free vector (derived ones re-derived: Fs = 1.5 Fc,
@@ -260,8 +287,8 @@ class ClosedLoopProblem:
 
         key = (dt, n_steps)
         if key not in self._refs:
-            sig = InputSignal("csv", table=(tuple(self.log.t.tolist()),
-                                            tuple(self.log.theta_ref.tolist())),
+            tt, rr = self.command_table()
+            sig = InputSignal("csv", table=(tuple(tt.tolist()), tuple(rr.tolist())),
                               path=self.log.source)
             self._refs[key] = Sampler(sig, dt, n_steps)
         return self._refs[key]

@@ -237,7 +237,8 @@ def build_problem(settings: ClosedLoopSettings, log: ClosedLoopLog) -> tuple[
         scales.append(v)
         notes[c] = note
     problem = ClosedLoopProblem(log, names, lo, hi, dict(settings.plant), tuple(chosen),
-                                np.array(scales), settings.dt_s, settings.ga_dt_s or settings.dt_s)
+                                np.array(scales), settings.dt_s, settings.ga_dt_s or settings.dt_s,
+                                settings.command)
     try:  # parameters the model refuses (e.g. Fc = 0 fixed with friction free) before the GA
         problem.params(0.5 * (lo + hi))
     except EmaError as exc:
@@ -296,7 +297,7 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
                                polish_iter=settings.max_iter if settings.polish else 0,
                                nuisance=tuple(n for n in NUISANCE if settings.free_contact),
                                lengthen=tuple(sh.lengthen_s),
-                               report=report)
+                               report=report, tie=sh.tie_motor_angle)
         x = ms.x.copy()
         x_first, cost_first, history = ms.x_ms, ms.search.cost, None
         spans, stages, restarted = [log.duration], [], False

@@ -76,6 +76,10 @@ class ClosedLoopShooting(Strict):
         description="longer segment lengths [s] the best start continues on, in order "
                     "(fewer free states: less bias; a length that leaves fewer than 10 "
                     "segments is skipped); [] for none")
+    tie_motor_angle: bool = Field(
+        True, description="tie each segment's motor angle to the integral of the logged motor "
+                          "speed between segment starts (kinematics; needs omega_motor_rpm "
+                          "fitted); false: each segment's motor angle is free")
 
 
 class ClosedLoopSettings(Strict):
@@ -91,6 +95,9 @@ class ClosedLoopSettings(Strict):
                           "units: time s|ms|us, angle deg|rad|mrad, speed rpm|rad/s|deg/s, "
                           "current A|mA, voltage V|mV; default the channel's own); null: the "
                           "file's columns carry the channel names")
+    command: Literal["linear", "cubic"] = Field(
+        "cubic", description="the command between the log's samples: cubic (a spline through "
+                             "them: a smooth command sampled) or linear (straight lines)")
     window: tuple[FiniteFloat, FiniteFloat] | None = Field(
         None, description="[T0, T1]: fit only the samples with T0 <= t <= T1 [s, the log's own "
                           "time]; null: the whole log")

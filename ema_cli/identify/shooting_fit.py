@@ -172,19 +172,24 @@ def mismatch_text(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray,
 
 def ms_uncertainty(res: ShootingSearch, dt: float) -> tuple[Uncertainty, np.ndarray]:
     """Cluster-robust uncertainty of the multiple-shooting estimate (states profiled out) ->
-    (uncertainty, the data residuals at the estimate)."""
+    (uncertainty, the data residuals at the estimate, without the tie's)."""
     sp = res.sp
     b = sp.base
     r, Jx, Js = sp.jacobian_many(res.V[None], dt)
     r, Jx, Js = r[0], Jx[0], Js[0]
     Jx = Jx / (b.upper - b.lower)[None, :]  # d r / d x (SI), from d r / d u
-    Jp = np.empty_like(Jx)
     clusters = sp.groups()
-    for idx in clusters:
-        coef, *_ = np.linalg.lstsq(Js[idx], Jx[idx], rcond=None)
-        Jp[idx] = Jx[idx] - Js[idx] @ coef
+    if r.shape[0] > sp.n_data:  # the tie couples neighbouring segments: profile all at once
+        F = sp.full_state_jacobian(Js, res.V)
+        coef, *_ = np.linalg.lstsq(F, Jx, rcond=None)
+        Jp = Jx - F @ coef
+    else:  # each segment's states touch only its own residuals
+        Jp = np.empty_like(Jx)
+        for idx in clusters:
+            coef, *_ = np.linalg.lstsq(Js[idx], Jx[idx], rcond=None)
+            Jp[idx] = Jx[idx] - Js[idx] @ coef
     cov, cond, dof = covariance_clustered(Jp, r, clusters)
-    return assess(b.names, res.x, cov, dof, cond, b.lower, b.upper), r
+    return assess(b.names, res.x, cov, dof, cond, b.lower, b.upper), r[:sp.n_data]
 
 
 LENGTHEN_ITER = 20  # joint LM iterations at each longer segment length
@@ -223,7 +228,7 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -
     seg = make_segments(sp.base.log.t, length)
     if seg.n >= sp.seg.n or seg.n < MIN_SEGMENTS:
         return 0
-    sp2 = ShootingProblem(sp.base, seg, sp.sigma)
+    sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie)
     x, S = sp.unpack(res.V)
     k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
     V2, _, _ = chain_seat(sp2, sp2.pack(x, S[k])[None], dt)
@@ -310,11 +315,11 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                       segment_s: float, dt_search: float, seed: int, max_iter: int,
                       polish_iter: int, refine_iter: int = 15,
                       nuisance: tuple[str, ...] = (), lengthen: tuple[float, ...] = (),
-                      report: Any = None) -> ShootingOutcome:
+                      report: Any = None, tie: bool = True) -> ShootingOutcome:
     """Search, uncertainty, polish and verdict (module docstring); the polish at the
     problem's fine step ``problem.dt``."""
     res = search(problem, n_starts=n_starts, segment_s=segment_s, dt=dt_search, seed=seed,
-                 max_iter=max_iter, report=report)
+                 max_iter=max_iter, report=report, tie=tie)
     timings: dict[str, float] = {}
     iters: dict[str, int] = {"search": res.iterations}
     t0 = time.perf_counter()

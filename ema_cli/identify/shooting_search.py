@@ -121,7 +121,7 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
             st.V[act[moved]], st.R[act[moved]], st.cost[act[moved]] = (V2[moved], R2[moved],
                                                                       c2[moved])
         R0, Jx, Js = sp.jacobian_many(st.V[act], dt)
-        AG = [sp.normal_equations(R0[q], Jx[q], Js[q]) for q in range(act.size)]
+        AG = [sp.normal_equations(R0[q], Jx[q], Js[q], st.V[act[q]]) for q in range(act.size)]
         A = np.array([a for a, _ in AG])
         g = np.array([b for _, b in AG])
         d = np.einsum("ijj->ij", A).copy()
@@ -230,18 +230,20 @@ def sobol_starts(lower: np.ndarray, upper: np.ndarray, n: int, seed: int) -> np.
     return lower + u * (upper - lower)
 
 
-def build(problem: ClosedLoopProblem, segment_s: float, x_mid: np.ndarray) -> ShootingProblem:
+def build(problem: ClosedLoopProblem, segment_s: float, x_mid: np.ndarray, tie: bool = True
+          ) -> ShootingProblem:
     """The multiple-shooting problem of ``problem`` with segments of about ``segment_s`` [s];
-    the state scales from a reconstruction of the whole log at parameters ``x_mid``."""
+    the state scales from a reconstruction of the whole log at parameters ``x_mid``; ``tie``:
+    the motor-angle tie (:meth:`ShootingProblem.tie_data`)."""
     from ema_cli.identify.shooting import make_segments, state_scales
 
     seg = make_segments(problem.log.t, segment_s)
     guess = reconstruct(problem, x_mid, np.arange(problem.log.n))
-    return ShootingProblem(problem, seg, state_scales(problem, guess))
+    return ShootingProblem(problem, seg, state_scales(problem, guess), tie=tie)
 
 
 def search(problem: ClosedLoopProblem, *, n_starts: int, segment_s: float, dt: float,
-           seed: int, max_iter: int, report: Any = None) -> ShootingSearch:
+           seed: int, max_iter: int, report: Any = None, tie: bool = True) -> ShootingSearch:
     """Multiple-shooting output-error search from ``n_starts`` Sobol starts over the bounds:
     segment states fitted per start, then batched joint LM with successive halving
     (:data:`HALVING`), the survivors run to convergence."""
@@ -249,7 +251,7 @@ def search(problem: ClosedLoopProblem, *, n_starts: int, segment_s: float, dt: f
 
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    sp = build(problem, segment_s, 0.5 * (problem.lower + problem.upper))
+    sp = build(problem, segment_s, 0.5 * (problem.lower + problem.upper), tie)
     X0 = sobol_starts(problem.lower, problem.upper, n_starts, seed)
     if report:
         report("segment states of every start", 0, 1)

@@ -212,7 +212,7 @@ def seg_costs(sp: ShootingProblem, R: np.ndarray) -> np.ndarray:
     """Data cost of every segment of candidates with residuals ``R[m, nd]`` -> [m, n_seg]."""
     owner, _ = sp._gather()
     n_ch, N = len(sp.base.channels), sp.base.log.n
-    sq = np.sum(R.reshape(R.shape[0], n_ch, N) ** 2, axis=1)
+    sq = np.sum(R[:, :n_ch * N].reshape(R.shape[0], n_ch, N) ** 2, axis=1)
     return np.stack([np.bincount(owner, weights=q, minlength=sp.seg.n) for q in sq])
 
 
