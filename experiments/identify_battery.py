@@ -81,6 +81,10 @@ def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None =
                  "kL_step_shift": (js.get("shooting", {}).get("step_shift") or {}).get("kL"),
                  "kL_segment_shift": (js.get("shooting", {}).get("segment_shift")
                                       or {}).get("kL"),
+                 "tie_rms_over_se": (js.get("shooting", {}).get("motor_angle_tie")
+                                     or {}).get("rms_over_se"),
+                 "tie_p_value": (js.get("shooting", {}).get("motor_angle_tie")
+                                 or {}).get("p_value"),
                  "timings_s": json.dumps({k: round(v, 2) for k, v in {
                      **js.get("timings_s", {}),
                      **js.get("shooting", {}).get("timings_s", {})}.items()})}

@@ -2,11 +2,11 @@
 model with stated truths (``ema identify --make-data``). Compute only: tables and truths are
 returned; ``report.closed_loop_report`` writes them.
 
-Closed-loop log: a chirp position command (5 deg, 0.5 -> 8 Hz over 4 s by default) sampled
-every ``sample_interval_s``; the simulator follows that sampled command (the ``csv`` reference,
-linear between the samples, exactly what a fit of the log feeds it) at ``dt_s`` and records the
-load angle, motor speed, current and voltage demand at the sample instants, each with Gaussian
-noise of ``noise_pct`` % of its RMS (the command is noise-free).
+Closed-loop log: a chirp position command (5 deg, 0.5 -> 8 Hz over 4 s by default); the
+simulator follows the chirp itself at ``dt_s`` and records the load angle, motor speed, current
+and voltage demand at the sample instants (every ``sample_interval_s``), each with Gaussian
+noise of ``noise_pct`` % of its RMS; the log keeps the command at its samples only (noise-free),
+as a real log does (a fit passes a cubic spline through them by default, ``command``).
 
 Friction sweep: the model's steady-state friction (``model.lugre.steady_friction_nb``, which
 the LuGre model reaches at constant speed) at log-spaced motor speeds in both directions, with
@@ -82,9 +82,8 @@ def closed_loop_log(
                         freq_end=freq_end_hz, sweep_time=duration_s)
     t = np.arange(n_s + 1) * sample_interval_s
     theta_ref = sample(chirp, sample_interval_s, n_s).pos_half[::2]
-    ref = InputSignal("csv", table=(tuple(t.tolist()), tuple(theta_ref.tolist())),
-                      path="(sampled chirp)")
-    res = simulate(params, ref, duration=float(t[-1]), dt=dt_s, output_interval=sample_interval_s)
+    res = simulate(params, chirp, duration=float(t[-1]), dt=dt_s,
+                   output_interval=sample_interval_s)
     if bool(res.diverged[0]):
         raise EmaError("the simulation that generates the closed-loop log diverged; check the "
                        "--set plant values", 1)

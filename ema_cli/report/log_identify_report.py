@@ -154,7 +154,13 @@ def _search_text(fit: ClosedLoopFit) -> str:
     pol = ms.polish
     kept = ("not run" if not pol.get("x") else "its optimum agrees with the estimate" if
             pol.get("agrees") else "differs: " + "; ".join(pol.get("why_not", [])))
-    return (f"Search: multiple shooting, {s.sp.seg.n} segments of the log, {len(s.starts_x)} "
+    tie = ms.tie
+    tie_text = ("Each segment's motor angle free (no motor speed fitted, or "
+                "shooting.tie_motor_angle: false). " if tie is None else
+                f"Motor angles tied to the integrated motor speed: {tie['joins']} joins at "
+                f"{tie['rms_over_se']:.3g} x their standard error (p = {tie['p_value']:.2g}). ")
+    return (tie_text +
+            f"Search: multiple shooting, {s.sp.seg.n} segments of the log, {len(s.starts_x)} "
             f"Sobol starts, joint Levenberg-Marquardt with successive halving; the "
             f"{len(s.final_cost)} finishing starts end at J = "
             + ", ".join(f"{c:.6g}" for c in s.final_cost) + f" ({s.agree} agree). "
@@ -238,9 +244,11 @@ def write_closed_loop(fit: ClosedLoopFit, out: Path, **fields: Any) -> list[str]
             "alpha_rad": fit.alpha_grid, "J_slice": fit.alpha_slice,
             "J_profile_linearised": fit.alpha_profile}, float_format="%.12g")
         files += ["alpha_profile.png", "alpha_profile.csv"]
-    log = fit.problem.log
-    write_columns(out / "reference.csv", {"t_s": log.t, "theta_ref_deg": np.degrees(
-        log.theta_ref)}, float_format="%.17g")
+    # the command as the fit fed it to the simulator (a cubic command: its table, 8 points
+    # per log interval), so that `ema simulate fitted.yaml` runs the fit's own simulation
+    t_ref, ref = fit.problem.command_table()
+    write_columns(out / "reference.csv", {"t_s": t_ref, "theta_ref_deg": np.degrees(ref)},
+                  float_format="%.17g")
     write_text(out / "fitted.yaml", yaml.safe_dump(fitted_config(fit, "reference.csv"),
                                                   sort_keys=False))
     write_columns(out / "fit.csv", closed_loop_fit_columns(fit), float_format="%.12g")

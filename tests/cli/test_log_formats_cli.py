@@ -172,7 +172,8 @@ def test_real_short_fit_of_a_renamed_parquet_log_in_other_units(tmp_path):
     assert js["data"]["n_samples"] == 1001 and js["data"]["t0_s"] == 7.0
     assert js["data"]["duration_s"] == pytest.approx(1.0, abs=1e-12)
     assert js["data"]["channels"] == ["theta_load_deg", "omega_motor_rpm", "current_a"]
-    # noise-free data from the same simulator and step: the polish lands on the truth (measured
-    # 1e-13 relative); 1e-6 leaves room for other BLAS/CPU rounding
+    # noise-free data from the same simulator and step, which followed the chirp itself where
+    # the fit follows a cubic spline through its samples (within 4.2e-7 rad): the polish lands
+    # on the truth within 5e-5 relative (measured: Fc -3.8e-6, the largest)
     for name in ("kL", "alpha", "Fc", "sigma2"):
-        assert js["parameters"][name]["value"] == pytest.approx(syn.truth[name], rel=1e-6), name
+        assert js["parameters"][name]["value"] == pytest.approx(syn.truth[name], rel=5e-5), name
