@@ -478,3 +478,26 @@ def test_the_bristle_start_is_continuous_in_the_motor_speed(monkeypatch):
     smooth = jump()
     monkeypatch.setattr(sh, "Z_SPEED", 1e-12)
     assert smooth < 1.0 < 10.0 < jump(), smooth
+
+
+def test_no_tie_without_a_fitted_motor_speed_or_when_switched_off():
+    """Without the motor speed among the fitted channels, or with ``shooting.tie_motor_angle:
+    false``, there are no tie residuals and no tie check; the setting is validated."""
+    from types import SimpleNamespace
+
+    from pydantic import ValidationError
+
+    from ema_cli.identify import shooting_search as ss
+    from ema_cli.identify.shooting_fit import tie_check
+
+    sp, _, x = _tie_problem(20.0, 0)
+    problem, _ = build_problem(ClosedLoopSettings(free_contact=False,
+                                                  channels={"theta_load_deg": 1e-3}), sp.base.log)
+    for tie, base in ((True, problem), (False, sp.base)):
+        no = ss.build(base, 0.1, x, tie)
+        assert no.tie_data() is None
+        assert all(int(g.max()) < no.n_data for g in no.groups())
+        assert tie_check(SimpleNamespace(sp=no), np.zeros(0)) is None
+    assert ClosedLoopSettings(shooting={"tie_motor_angle": False}).shooting.tie_motor_angle is False
+    with pytest.raises(ValidationError, match="tie"):
+        ClosedLoopSettings(shooting={"tie": True})
