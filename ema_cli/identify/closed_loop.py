@@ -254,19 +254,27 @@ class ClosedLoopProblem:
         lg = self.log
         b = lg.n - 1 if b is None else b
         tt = lg.t[a:b + 1]
-        if self.command == "linear" or lg.n < 4 or tt.shape[0] < 2:
+        spline = self._command_spline()
+        if spline is None or tt.shape[0] < 2:
             return tt, lg.theta_ref[a:b + 1]
-        if "spline" not in self._refs:
-            from scipy.interpolate import CubicSpline
-
-            self._refs["spline"] = CubicSpline(lg.t, lg.theta_ref)
         frac = np.arange(COMMAND_SUBSAMPLES) / COMMAND_SUBSAMPLES
         td = np.concatenate([(tt[:-1, None] + np.diff(tt)[:, None] * frac[None]).ravel(),
                              tt[-1:]])
-        rd = self._refs["spline"](td)
+        rd = spline(td)
         k = np.arange(0, td.shape[0], COMMAND_SUBSAMPLES)
         rd[k] = lg.theta_ref[a:b + 1]  # the samples exactly
         return td, rd
+
+    def _command_spline(self) -> Any:
+        """The cubic spline through every command sample of the log (built once), or None
+        (``command`` linear, or fewer than 4 samples)."""
+        if self.command == "linear" or self.log.n < 4:
+            return None
+        if "spline" not in self._refs:
+            from scipy.interpolate import CubicSpline
+
+            self._refs["spline"] = CubicSpline(self.log.t, self.log.theta_ref)
+        return self._refs["spline"]
 
     def params(self, x: np.ndarray) -> dict[str, float]:
         """The complete SI parameters of one free vector (derived ones re-derived: Fs = 1.5 Fc,
@@ -352,8 +360,8 @@ class ClosedLoopProblem:
                                        _refs={})
         cut = ClosedLoopLog(lg.t[:k], lg.theta_ref[:k], {c: y[:k] for c, y in lg.channels.items()},
                             lg.source, lg.t0, lg.truth)
-        self.command_table(0, 1)  # the whole log's spline: the prefix's command is its own
-        keep = {"spline": self._refs["spline"]} if "spline" in self._refs else {}
+        spline = self._command_spline()  # the whole log's: the prefix's command is its own
+        keep = {} if spline is None else {"spline": spline}
         return dataclasses.replace(self, log=cut, evaluations=0, kernel_steps=0, kernel_s=0.0,
                                    _refs=keep)
 

@@ -143,11 +143,11 @@ class ShootingProblem:
             for a, b in zip(self.seg.first[:-1], self.seg.first[1:], strict=True):
                 tt, ww = t[a:b + 1], w[a:b + 1]
                 h = np.diff(tt)
-                trap = float(np.sum(0.5 * h * (ww[1:] + ww[:-1])))
-                quad = float(simpson(ww, x=tt)) - trap if tt.shape[0] > 2 else 0.0
-                wt = np.zeros(tt.shape[0])
+                wt = np.zeros(tt.shape[0])  # the trapezoid's weights
                 wt[1:] += 0.5 * h
                 wt[:-1] += 0.5 * h
+                trap = float(wt @ ww)
+                quad = float(simpson(ww, x=tt)) - trap if tt.shape[0] > 2 else 0.0
                 d_i.append(trap)
                 s_i.append(math.sqrt(s_w**2 * float(np.sum(wt**2)) + quad**2))
             out = (np.array(d_i), np.maximum(np.array(s_i), 1e-12))

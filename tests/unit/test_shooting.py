@@ -107,6 +107,17 @@ def _log(syn) -> ClosedLoopLog:
                          syn.truth)
 
 
+def _at_truth(plant: dict, seed: int, duration_s: float, segment_s: float):
+    """A noisy (1 %) log of the kernel at ``plant``, its problem with the contact law stated,
+    the true free vector and the multiple-shooting problem on ``segment_s`` segments."""
+    from ema_cli.identify import shooting_search as ss
+
+    syn = closed_loop_log(plant, 1.0, seed, duration_s=duration_s)
+    problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
+    x = np.array([syn.truth[n] for n in problem.names])
+    return problem, x, ss.build(problem, segment_s, x)
+
+
 def test_segments_at_the_truth_fit_to_the_noise_level():
     """At the true parameters, the segment states reconstructed from the data and fitted
     segment by segment reach the noise level (J/N within 10 % of 1) on a noisy log, and the
@@ -114,11 +125,8 @@ def test_segments_at_the_truth_fit_to_the_noise_level():
     few state scales."""
     from ema_cli.identify import shooting_search as ss
 
-    syn = closed_loop_log({"kL": 450.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 1.0, 1,
-                          duration_s=1.0)
-    problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
-    x = np.array([syn.truth[n] for n in problem.names])
-    sp = ss.build(problem, 0.2, x)
+    problem, x, sp = _at_truth({"kL": 450.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 1,
+                               1.0, 0.2)
     V = ss.start_states(sp, x[None], 5e-5)
     R, ends = sp.residuals_many(V, 5e-5)
     N = problem.measured.size
@@ -374,15 +382,11 @@ def test_the_tie_enters_the_residuals_the_normal_equations_and_the_clusters():
     central finite difference to 1e-6; the normal equations assembled from the compact
     Jacobian equal J^T J and J^T r of the full one; each tie joins its first segment's
     cluster; ``tie_motor_angle: false`` leaves the data residuals alone."""
-    from ema_cli.identify import shooting_search as ss
     from ema_cli.identify.shooting import NV
     from ema_cli.identify.shooting_seat import start_states
 
-    syn = closed_loop_log({"kL": 500.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 1.0, 5,
-                          duration_s=1.0)
-    problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
-    x = np.array([syn.truth[n] for n in problem.names])
-    sp = ss.build(problem, 0.2, x)
+    _, x, sp = _at_truth({"kL": 500.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 5, 1.0,
+                         0.2)
     V = start_states(sp, x[None], 5e-5)
     R, _ = sp.residuals_many(V, 5e-5)
     n = sp.seg.n
@@ -460,11 +464,8 @@ def test_the_bristle_start_is_continuous_in_the_motor_speed(monkeypatch):
     g_fast = (prm["Fc"] + (prm["Fs"] - prm["Fc"]) * np.exp(-1.0)) / prm["sigma0"]
     assert z[3] == pytest.approx(g_fast, rel=1e-12)
 
-    syn = closed_loop_log({"kL": 600.0, "alpha": 0.003, "Fc": 0.03, "sigma2": 0.01}, 1.0, 4,
-                          duration_s=0.5)
-    problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
-    x = np.array([syn.truth[n] for n in problem.names])
-    sp = ss.build(problem, 0.05, x)
+    _, x, sp = _at_truth({"kL": 600.0, "alpha": 0.003, "Fc": 0.03, "sigma2": 0.01}, 4, 0.5,
+                         0.05)
     V = ss.start_states(sp, x[None], 5e-5)
     V[0, sp.p:sp.p + NV] = 0.0  # the first segment at rest
     step = V.copy()
