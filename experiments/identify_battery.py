@@ -85,6 +85,9 @@ def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None =
                                      or {}).get("rms_over_se"),
                  "tie_p_value": (js.get("shooting", {}).get("motor_angle_tie")
                                  or {}).get("p_value"),
+                 "segments": js.get("shooting", {}).get("segments"),
+                 "covariance_segments": js.get("shooting", {}).get("covariance_segments"),
+                 "fell_back": js.get("shooting", {}).get("fell_back_from_longest_segments"),
                  "timings_s": json.dumps({k: round(v, 2) for k, v in {
                      **js.get("timings_s", {}),
                      **js.get("shooting", {}).get("timings_s", {})}.items()})}

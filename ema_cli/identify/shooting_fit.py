@@ -36,7 +36,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -44,30 +43,26 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import FLOOR_NOTE, NOISE_NOTE, ClosedLoopProblem
-from ema_cli.identify.shooting_search import (
-    AGREE_REL,
-    RESEAT_RATIO,
-    ShootingSearch,
-    chain_seat,
-    lm_many,
-    new_state,
-    search,
+from ema_cli.identify.closed_loop import ClosedLoopProblem
+from ema_cli.identify.shooting_lengthen import (
+    Lengthening,
+    continue_at,
+    lengthen_both,
+    split_for_covariance,
 )
+from ema_cli.identify.shooting_quality import (
+    AT_NOISE_RATIO,
+    CONFIRM_RATIO,
+    JUDGED_NOTES,
+    NOISE_LEVEL_RATIO,
+    channel_ratios,
+    mismatch_text,
+    too_high,
+)
+from ema_cli.identify.shooting_search import ShootingSearch, search
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
 from ema_cli.identify.whole_log import polish
 
-NOISE_LEVEL_RATIO = 2.0  # a channel fits when its residual RMS is within this x its noise [-]
-CONFIRM_RATIO = 1.2
-"""An optimum is confirmed only when the segments fit every channel scaled by its noise
-estimate within this x its noise [-]. The right model at its optimum leaves the noise (ratio
-near 1: on the independent battery the fits that were right ended at 0.91-1.09, commit
-73ca9c2); a model that leaves 20 % more than the noise explains the log only approximately,
-and its parameters absorb the difference (measured: Hunt-Crossley logs fitted without that
-law confirmed at 1.33 and 1.78 x with kL -9 % and +21 %)."""
-AT_NOISE_RATIO = 1.1
-"""A fit whose every channel (scaled by its noise estimate) is within this x its noise is at
-the noise level (said in the verdict's reason; it does not confirm the optimum alone)."""
 BOUND_FRACTION = 1e-6  # a parameter within this fraction of its range from a bound sits on it
 
 
@@ -90,6 +85,9 @@ class ShootingOutcome:
     segment_shift: np.ndarray | None = None  # estimate's move at the last lengthening (SI)
     runner_up_won: bool = False  # the runner-up start ended lower on the longest segments
     tie: dict[str, Any] | None = None  # the motor-angle tie at the estimate (tie_check)
+    covariance_segments: int = 0  # the clusters of the covariance (split_for_covariance)
+    fit_first: np.ndarray | None = None  # the first samples of those parts (the fit drawn)
+    fell_back: bool = False  # the longest segments did not fit: the estimate is the anchor's
     segment_prediction: np.ndarray | None = None
     """The fit itself: every channel as the segments predict it, each segment simulated from
     its fitted start state, at the estimate [n_ch, n_samples] (SI)."""
@@ -99,6 +97,8 @@ class ShootingOutcome:
         names = s.sp.base.names
         return {
             "segments": int(s.sp.seg.n), "lengthened_to_s": s.lengths,
+            "covariance_segments": int(self.covariance_segments or s.sp.seg.n),
+            "fell_back_from_longest_segments": self.fell_back,
             "starts": int(s.starts_x.shape[0]),
             "finished_starts": {"cost": s.final_cost.tolist(),
                                 "x": [dict(zip(names, map(float, x), strict=True))
@@ -120,57 +120,6 @@ class ShootingOutcome:
             "runner_up_won_on_longer_segments": self.runner_up_won,
             "motor_angle_tie": self.tie,
         }
-
-
-def channel_ratios(problem: ClosedLoopProblem, r: np.ndarray) -> dict[str, float]:
-    """Per channel, the RMS of the weighted residuals ``r`` (channel after channel) [-]."""
-    n = problem.log.n
-    return {c: float(np.sqrt(np.mean(r[j * n:(j + 1) * n] ** 2)))
-            for j, c in enumerate(problem.channels)}
-
-
-JUDGED_NOTES = (NOISE_NOTE, FLOOR_NOTE)
-"""Channels whose scale was chosen automatically (their noise estimate, or the floor of
-noise-free data) are judged; a scale given by hand is the user's and is not. A noise-free
-log's channels sit on the floor: judging them too keeps a fit of such a log from being
-confirmed vacuously (measured: an independent steps log with 0.007 % noise, every channel on
-the floor, "confirmed" at kL -2.6 % with its segments fitting the motor speed at
-2.55 x and the current at 2.2 x the floor)."""
-
-
-def too_high(ratios: dict[str, float], notes: dict[str, str],
-             limit: float = NOISE_LEVEL_RATIO) -> dict[str, float]:
-    """The channels with an automatic scale (:data:`JUDGED_NOTES`) whose ratio exceeds
-    ``limit``."""
-    return {c: v for c, v in ratios.items() if notes[c] in JUDGED_NOTES and v > limit}
-
-
-def worst_windows(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray, channel: str,
-                  k: int = 2) -> list[tuple[float, float, float]]:
-    """The ``k`` windows (the search's segments, starting at samples ``first``) where the
-    weighted residuals ``r`` of ``channel`` are largest -> (t0 [s], t1 [s], RMS ratio [-])."""
-    n = problem.log.n
-    j = problem.channels.index(channel)
-    rc = r[j * n:(j + 1) * n]
-    edges = [*first.tolist(), n]
-    t = problem.log.t
-    out = [(float(t[a]), float(t[b - 1]), float(np.sqrt(np.mean(rc[a:b] ** 2))))
-           for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
-    return sorted(out, key=lambda w: -w[2])[:k]
-
-
-def mismatch_text(problem: ClosedLoopProblem, first: np.ndarray, r: np.ndarray,
-                  high: dict[str, float], notes: dict[str, str] | None = None) -> str:
-    """Each channel of ``high`` with its ratio and the time ranges where it fits worst
-    (``notes``: the channels' scale notes; a channel on the floor says so)."""
-    parts = []
-    for c, v in high.items():
-        w = worst_windows(problem, first, r, c)
-        what = ("its scale (1e-4 of its range: the log is nearly noise-free)"
-                if notes is not None and notes.get(c) == FLOOR_NOTE else "its noise estimate")
-        parts.append(f"{c} {v:.3g} x {what}, worst at " + ", ".join(
-            f"t = {a:.3g}-{b:.3g} s ({q:.3g} x)" for a, b, q in w))
-    return "; ".join(parts)
 
 
 TIE_P = 1e-3
@@ -217,97 +166,11 @@ def ms_uncertainty(res: ShootingSearch, dt: float
             r[sp.n_data:])
 
 
-LENGTHEN_ITER = 20  # joint LM iterations at each longer segment length
-MIN_SEGMENTS = 10
-"""A lengthening that would leave fewer segments is skipped: the segments are the clusters of
-the jackknife covariance (its t quantile has one degree of freedom fewer than there are
-segments, and its variance estimate is the spread of as many deletions) [-]."""
-
-
-def continue_at(res: ShootingSearch, dt: float, iterations: int) -> int:
-    """Continue the best start at step ``dt`` [s] (in place): re-seated, then joint LM ->
-    the LM iterations used. The states were seated at the search's step, so when the LM
-    stalls only the segments that fit clearly worse than the median one are re-fitted."""
-    st = new_state(res.sp, res.V[None], dt)
-    st.V, st.R, st.cost = chain_seat(res.sp, st.V, dt)
-    lm_many(res.sp, st, dt, iterations, stall_ratio=RESEAT_RATIO)
-    res.V, res.cost = st.V[0].copy(), float(st.cost[0])
-    res.x = res.sp.unpack(res.V)[0]
-    return int(st.iterations[0])
-
-
-def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int) -> int:
-    """Continue the search's best start on segments of ``length`` [s] (in place): each new
-    segment starts from the state of the old segment that started at the same sample (the
-    nearest before it), chained (:func:`chain_seat`), then joint LM. Kept only if the data
-    cost per sample does not rise by more than 5 %. When the LM stalls, only the segments
-    that fit clearly worse than the median one are re-fitted (the states come from the
-    converged shorter segments). Longer segments leave fewer free states
-    (with one state per 0.05 s the estimator of the parameters is biased on some logs: the
-    incidental-parameter problem), but a longer horizon is harder to seat. Returns the LM
-    iterations used (0: skipped, as when fewer than :data:`MIN_SEGMENTS` segments would
-    be left)."""
-    from ema_cli.identify.shooting import ShootingProblem, make_segments
-
-    sp = res.sp
-    seg = make_segments(sp.base.log.t, length)
-    if seg.n >= sp.seg.n or seg.n < MIN_SEGMENTS:
-        return 0
-    sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie)
-    x, S = sp.unpack(res.V)
-    k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
-    V2, _, _ = chain_seat(sp2, sp2.pack(x, S[k])[None], dt)
-    st = new_state(sp2, V2, dt)
-    lm_many(sp2, st, dt, iterations, stall_ratio=RESEAT_RATIO)
-    if st.cost[0] <= 1.05 * res.cost:
-        res.sp, res.V, res.cost = sp2, st.V[0].copy(), float(st.cost[0])
-        res.x = sp2.unpack(res.V)[0]
-        res.lengths.append(length)
-    return int(st.iterations[0])
-
-
 def on_bound(problem: ClosedLoopProblem, x: np.ndarray) -> list[str]:
     """The free parameters that sit on a bound."""
     span = problem.upper - problem.lower
     return [n for j, n in enumerate(problem.names)
             if min(x[j] - problem.lower[j], problem.upper[j] - x[j]) <= BOUND_FRACTION * span[j]]
-
-
-def lengthen_both(res: ShootingSearch, lengthen: tuple[float, ...], dt_search: float,
-                  iters: dict[str, int], report: Any = None
-                  ) -> tuple[ShootingSearch, ShootingSearch | None, np.ndarray, bool]:
-    """The best start and the runner-up continued on the longer segments ``lengthen`` [s]
-    (:func:`lengthened`) -> (best, runner-up, the best's move at its last lengthening [SI],
-    whether the runner-up won: the cost that counts is the longest segments')."""
-    # the runner-up goes the same way, so that the agreement compares like with like
-    runner = None
-    if res.final_V is not None and len(res.final_V) > 1:
-        runner = dataclasses.replace(res, V=res.final_V[1].copy(), x=res.final_x[1].copy(),
-                                     cost=float(res.final_cost[1]), lengths=[])
-    cands = [res] if runner is None else [res, runner]
-    shifts = [np.zeros_like(res.x) for _ in cands]
-    for length in lengthen:  # longer segments from the optimum: fewer free states
-        if report:
-            report(f"segments of {length:g} s", 0, 1)
-        for k, cand in enumerate(cands):
-            x_before, kept = cand.x.copy(), len(cand.lengths)
-            n_it = lengthened(cand, length, dt_search, LENGTHEN_ITER)
-            if k == 0:
-                iters[f"lengthen_{length:g}_s"] = n_it
-            if len(cand.lengths) > kept:
-                shifts[k] = cand.x - x_before
-    # the cost that counts is the longest segments': a runner-up that ends lower there wins
-    # (on multisine logs the truth's basin can be the lower one at 0.2 s and not at 0.05 s)
-    # (a runner-up that kept a longer length than the best and still costs less wins too:
-    # longer segments leave fewer free states, so they cannot cost less for the same fit)
-    runner_won = bool(runner is not None
-                      and (runner.lengths == res.lengths
-                           or len(runner.lengths) > len(res.lengths))
-                      and runner.cost < res.cost * (1.0 - AGREE_REL))
-    if runner_won:
-        res, runner = runner, res
-        shifts.reverse()
-    return res, runner, shifts[0], runner_won
 
 
 def polish_check(problem: ClosedLoopProblem, notes: dict[str, str], x: np.ndarray,
@@ -336,6 +199,24 @@ def polish_check(problem: ClosedLoopProblem, notes: dict[str, str], x: np.ndarra
             "status": str(pol.message)}
 
 
+def refine_split(lg: Lengthening, fine: float, dt_search: float, refine_iter: int,
+                 iters: dict[str, int], key: str, report: Any = None) -> tuple[Any, ...]:
+    """The best of ``lg`` refined at the fine step ``fine`` [s] (in place; the coarse step's
+    bias off: contact timing; its LM iterations in ``iters[key]``) and split for the
+    covariance -> (the refined best, its split, the step's move, its parameters and cost at
+    the search's step). The step's move is its own error's bound (a fixed step times each
+    contact to within a step: with the jump law a bias that no noise model covers; first
+    order: 4x the error left for a step 5x finer)."""
+    res = lg.best
+    x_coarse, c_coarse = res.x.copy(), res.cost
+    if fine < dt_search and refine_iter > 0:
+        if report:
+            report(f"refining at dt = {fine:g} s", 0, 1)
+        iters[key] = continue_at(res, fine, refine_iter)
+    split = split_for_covariance(res, min(fine, dt_search))
+    return res, split, res.x - x_coarse, x_coarse, c_coarse
+
+
 def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_starts: int,
                       segment_s: float, dt_search: float, seed: int, max_iter: int,
                       polish_iter: int, refine_iter: int = 15,
@@ -348,25 +229,31 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     timings: dict[str, float] = {}
     iters: dict[str, int] = {"search": res.iterations}
     t0 = time.perf_counter()
-    res, runner, seg_shift, runner_won = lengthen_both(res, lengthen, dt_search, iters,
-                                                       report)
-    x_best_coarse, cost_coarse = res.x.copy(), res.cost
-    x_runner = None if runner is None else runner.x.copy()
+    lg = lengthen_both(res, lengthen, dt_search, iters, report, notes)
     timings["lengthen_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     fine = problem.dt
-    if fine < dt_search and refine_iter > 0:  # the coarse step's bias off (contact timing)
-        if report:
-            report(f"refining at dt = {fine:g} s", 0, 1)
-        iters["refine"] = continue_at(res, fine, refine_iter)
+    dt_unc = min(fine, dt_search)
+    res, res_cov, shift, x_best_coarse, cost_coarse = refine_split(
+        lg, fine, dt_search, refine_iter, iters, "refine", report)
+    unc_ms, r_ms, r_tie = ms_uncertainty(res_cov, dt_unc)
+    fell_back = False
+    if lg.anchor is not None and too_high(channel_ratios(problem, r_ms), notes, CONFIRM_RATIO):
+        # the longest segments do not fit at the fine step where the last ones with enough
+        # segments for the covariance may (measured: a noise-free log's 0.8 s segments at
+        # 1.47 x its floor after the refinement): those refined too, and kept if they fit
+        a = refine_split(lg.anchor, fine, dt_search, refine_iter, iters, "refine_anchor",
+                         report)
+        unc_a, r_a, r_tie_a = ms_uncertainty(a[1], dt_unc)
+        if not too_high(channel_ratios(problem, r_a), notes, CONFIRM_RATIO):
+            lg, fell_back = lg.anchor, True
+            res, res_cov, shift, x_best_coarse, cost_coarse = a
+            unc_ms, r_ms, r_tie = unc_a, r_a, r_tie_a
+    runner, seg_shift, runner_won = lg.runner, lg.shift, lg.runner_won
+    x_runner = None if runner is None else runner.x.copy()
     timings["refine_s"] = time.perf_counter() - t0
-    # the step's own error (a fixed step times each contact to within a step: with the jump
-    # law a bias that no noise model covers): the move from the search's step to the fine
-    # one, an upper bound of the fine step's error (first order: 4x it for a step 5x finer)
-    shift = res.x - x_best_coarse
     t0 = time.perf_counter()
-    unc_ms, r_ms, r_tie = ms_uncertainty(res, min(fine, dt_search))
-    tie = tie_check(res, r_tie)
+    tie = tie_check(res_cov, r_tie)
     # widened by the method's own errors, which no noise model covers: the step's (above) and
     # the free segment states' (the incidental-parameter bias: the move at the last
     # lengthening, about the bias left when the number of free states halves)
@@ -402,7 +289,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                        "better optimum (try more starts)"
                        + ("" if at_noise else f", and the fit is above the noise level "
                           f"(> {AT_NOISE_RATIO:g} x)"))
-    first = res.sp.seg.first
+    first = res_cov.sp.seg.first
     if high:
         reasons.append("the segments do not fit the log to its noise level (" + mismatch_text(
             problem, first, r_ms, high, notes) + "): a local minimum or a model that cannot "
@@ -429,6 +316,8 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                           confirmed=not reasons, reasons=reasons, timings=timings,
                           step_shift=shift, segment_shift=seg_shift,
                           stage_iterations=iters, runner_up_won=runner_won, tie=tie,
+                          covariance_segments=res_cov.sp.seg.n, fell_back=fell_back,
+                          fit_first=res_cov.sp.seg.first.copy(),
                           segment_prediction=seg_pred)
     if polish_iter <= 0:
         out.polish = {"kept": False, "why": "no polish (polish: false)"}

@@ -53,13 +53,17 @@ def channel_figure(fit: ClosedLoopFit, channel: str) -> Figure:
         a0.plot(t, yh, "C0", lw=0.9, label="fitted model")
     else:
         ys = seg[j] / f
-        n_seg = fit.shooting.search.sp.seg.n
+        ms = fit.shooting
+        first = ms.search.sp.seg.first if ms.fit_first is None else ms.fit_first
+        n_seg, n_long = first.shape[0], ms.search.sp.seg.n
+        cut = ("" if n_seg == n_long else
+               f" (the estimate's {n_long} cut into parts for the covariance)")
         a0.plot(t, yh, "C0", lw=0.8, alpha=0.7,
                 label="fitted model run from rest over the whole log (a check)")
-        a0.plot(t, ys, "C1", lw=0.9, label=f"the fit: {n_seg} segments, each simulated from "
-                "its fitted start state")
+        a0.plot(t, ys, "C1", lw=0.9, label=f"the fit: {n_seg} segments{cut}, each simulated "
+                "from its fitted start state")
         if n_seg <= 40:  # where each segment starts (more would hide the signals)
-            starts = t[fit.shooting.search.sp.seg.first[1:]]
+            starts = t[first[1:]]
             for a in (a0, a1):
                 for ts in starts:
                     a.axvline(ts, color="0.8", lw=0.6, zorder=0)
@@ -159,8 +163,15 @@ def _search_text(fit: ClosedLoopFit) -> str:
                 "shooting.tie_motor_angle: false). " if tie is None else
                 f"Motor angles tied to the integrated motor speed: {tie['joins']} joins at "
                 f"{tie['rms_over_se']:.3g} x their standard error (p = {tie['p_value']:.2g}). ")
+    seg = (f"{s.sp.seg.n} segments of the log" if not s.lengths else
+           f"segments lengthened to {s.lengths[-1]:g} s ({s.sp.seg.n} of them"
+           + ("" if ms.covariance_segments in (0, s.sp.seg.n) else
+              f"; the covariance on {ms.covariance_segments} parts") + ")")
+    if ms.fell_back:
+        seg += (" (the longest segments did not fit at the fine step: the estimate is from "
+                "the last length with enough segments for the covariance)")
     return (tie_text +
-            f"Search: multiple shooting, {s.sp.seg.n} segments of the log, {len(s.starts_x)} "
+            f"Search: multiple shooting, {seg}, {len(s.starts_x)} "
             f"Sobol starts, joint Levenberg-Marquardt with successive halving; the "
             f"{len(s.final_cost)} finishing starts end at J = "
             + ", ".join(f"{c:.6g}" for c in s.final_cost) + f" ({s.agree} agree). "

@@ -178,12 +178,13 @@ def short_fit():
 
 def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
     """A 1 s log (1 % noise, truths far from the defaults) from the default bounds with 4
-    starts, the contact law stated (the data's), segments lengthened 0.05 -> 0.1 s (0.2 s
-    would leave 5 segments, fewer than the 10 the jackknife needs: skipped): kL, alpha
+    starts, the contact law stated (the data's), segments lengthened 0.05 -> 0.1 -> 0.2 s
+    (5 segments: the covariance on 10, each cut in two): kL, alpha
     within 1 %, Fc, sigma2 within 2 %, every truth inside its 95 % interval, the optimum
     confirmed, the motor-angle tie passing. (One second of 1 % noise carries kL to about
-    +-1.7 % at 95 %: measured -0.36 to -0.54 % with the tie on or off and either command
-    table, so 0.5 % would test the noise draw, not the search.)"""
+    +-1.7 % at 95 %: measured -0.36 to -0.54 % on 0.1 s segments with the tie on or off and
+    either command table, +0.06 % on 0.2 s, so 0.5 % would test the noise draw, not the
+    search.)"""
     syn, fit = short_fit
     js = fit.to_json()
     e = js["error_pct_vs_truth"]
@@ -194,7 +195,9 @@ def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
     assert js["optimum"]["confirmed"] is True, js["optimum"]
     assert all(js["truth_in_ci95"].values()), (js["truth_in_ci95"], js["parameters"])
     assert js["not_determined"] == []
-    assert js["shooting"]["segments"] == 10 and js["shooting"]["lengthened_to_s"] == [0.1]
+    sh = js["shooting"]
+    assert sh["segments"] == 5 and sh["lengthened_to_s"] == [0.1, 0.2], sh
+    assert sh["covariance_segments"] == 10 and not sh["fell_back_from_longest_segments"]
 
 
 def test_the_fit_itself_is_written_and_drawn_as_the_segments_predict_it(short_fit):
@@ -243,11 +246,11 @@ def test_a_runner_up_that_disagrees_widens_the_intervals_to_both(monkeypatch):
     moved = {}
 
     def fake(*a, **k):
-        res, runner, shift, won = real(*a, **k)
-        runner.x = runner.x.copy()
-        runner.x[0] *= 1.5  # kL
-        moved["kL"] = float(runner.x[0])
-        return res, runner, shift, won
+        lg = real(*a, **k)
+        lg.runner.x = lg.runner.x.copy()
+        lg.runner.x[0] *= 1.5  # kL
+        moved["kL"] = float(lg.runner.x[0])
+        return lg
 
     monkeypatch.setattr(sf, "lengthen_both", fake)
     syn = closed_loop_log({}, 1.0, 0, duration_s=0.5)
@@ -284,7 +287,7 @@ def test_the_worst_windows_are_where_the_residuals_are():
     """The verdict names where a channel fits worst: residuals of 1 everywhere, 3 on the
     samples of the third 0.2 s window of the current: that window first, at 3x."""
     from ema_cli.identify.shooting import make_segments
-    from ema_cli.identify.shooting_fit import mismatch_text, worst_windows
+    from ema_cli.identify.shooting_quality import mismatch_text, worst_windows
 
     syn = closed_loop_log({}, 1.0, 0, duration_s=1.0)
     problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
@@ -502,3 +505,39 @@ def test_no_tie_without_a_fitted_motor_speed_or_when_switched_off():
     assert ClosedLoopSettings(shooting={"tie_motor_angle": False}).shooting.tie_motor_angle is False
     with pytest.raises(ValidationError, match="tie"):
         ClosedLoopSettings(shooting={"tie": True})
+
+
+def test_the_covariance_of_a_fit_on_few_segments_is_taken_on_its_segments_cut_in_parts():
+    """An estimate on 5 segments (0.2 s of a 1 s log, at the truth) is cut into 10 parts for
+    its covariance: the cuts are nested (every segment start is a part's start, the first
+    part keeps its segment's state), the second parts start where the estimate's own
+    simulation is (without the state fit: the data cost within 0.5 % of the 5 segments';
+    measured 0.0x %, the bristle state re-started), the state fit lowers it, and the
+    jackknife has 10 clusters (9 degrees of freedom)."""
+    from ema_cli.identify import shooting_fit as sf
+    from ema_cli.identify import shooting_lengthen as sl
+    from ema_cli.identify import shooting_search as ss
+
+    problem, x, sp = _at_truth({"kL": 650.0, "alpha": 0.002, "Fc": 0.04, "sigma2": 0.01}, 4,
+                               1.0, 0.2)
+    dt = 5e-5
+    V = ss.start_states(sp, x[None], dt)[0]
+    R, _ = sp.residuals_many(V[None], dt)
+    cost = float(np.sum(R[0, :sp.n_data] ** 2))
+    res = ss.ShootingSearch(sp, x.copy(), V, cost, x[None], x[None], np.array([cost]), 1, 0,
+                            [], {})
+    assert sp.seg.n == 5
+    raw = sl.split_for_covariance(res, dt, iterations=0)
+    fitted = sl.split_for_covariance(res, dt)
+    for r in (raw, fitted):
+        assert r.sp.seg.n == 10
+        assert set(sp.seg.first) <= set(r.sp.seg.first)
+        np.testing.assert_array_equal(r.x, x)
+    _, S = sp.unpack(V)
+    _, S2 = raw.sp.unpack(raw.V)
+    np.testing.assert_array_equal(S2[::2], S)
+    assert abs(raw.cost / cost - 1.0) < 5e-3, (raw.cost, cost)
+    assert fitted.cost <= raw.cost
+    unc, r_data, r_tie = sf.ms_uncertainty(fitted, dt)
+    assert unc.dof == 9 and r_tie.size == 9
+    assert sl.split_for_covariance(raw, dt) is raw  # enough segments: as it is
