@@ -541,3 +541,41 @@ def test_the_covariance_of_a_fit_on_few_segments_is_taken_on_its_segments_cut_in
     unc, r_data, r_tie = sf.ms_uncertainty(fitted, dt)
     assert unc.dof == 9 and r_tie.size == 9
     assert sl.split_for_covariance(raw, dt) is raw  # enough segments: as it is
+
+
+def test_when_the_longest_segments_do_not_fit_the_estimate_falls_back_to_the_anchor(
+        monkeypatch):
+    """A 1 s log lengthened 0.05 -> 0.1 -> 0.2 s (5 segments: the anchor is the 0.1 s fit).
+    The 0.2 s fit is spoiled after its refinement (kL x 1.15, states kept), so its segments
+    no longer fit the log to its noise: the anchor is refined and is the estimate
+    (``fell_back_from_longest_segments``), on its own 10 segments, confirmed, kL within 1 %
+    of the truth; without the spoiling the same fit keeps the 0.2 s segments."""
+    import ema_cli.identify.shooting_fit as sf
+
+    real = sf.continue_at
+    calls = []
+
+    def spoiled(res, dt, iterations):
+        n = real(res, dt, iterations)
+        if not calls:  # the first refinement: the longest segments'
+            x, S = res.sp.unpack(res.V)
+            x = x.copy()
+            x[0] *= 1.15
+            res.V = res.sp.pack(x, S)
+            res.x = x
+        calls.append(res.sp.seg.n)
+        return n
+
+    monkeypatch.setattr(sf, "continue_at", spoiled)
+    syn = closed_loop_log({"kL": 420.0, "alpha": 0.0055, "Fc": 0.05, "sigma2": 0.02}, 1.0, 3,
+                          duration_s=1.0)
+    settings = ClosedLoopSettings(shooting={"starts": 4, "lengthen_s": [0.1, 0.2]},
+                                  free_contact=False, profile_points=5, polish=False)
+    js = run_closed_loop(settings, _log(syn)).to_json()
+    sh = js["shooting"]
+    assert calls == [5, 10], calls
+    assert sh["fell_back_from_longest_segments"] is True
+    assert sh["segments"] == 10 and sh["covariance_segments"] == 10
+    assert sh["lengthened_to_s"] == [0.1] and "refine_anchor" in sh["stage_iterations"]
+    assert js["optimum"]["confirmed"] is True, js["optimum"]
+    assert abs(js["error_pct_vs_truth"]["kL"]) < 1.0, js["error_pct_vs_truth"]
