@@ -433,5 +433,8 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
         cases.append(DesignCase(case, vals, sides, res))
     timings["acceptance"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
-    return DesignResult(cfg, str(log), str(tune_path), str(spec_path), ident, tuned, cases,
+    # the bundled tuning config by its place in the project, not this machine's path
+    tune_shown = ("the bundled configs/tune.yaml" if tune_path == DEFAULT_TUNE_CONFIG
+                  else str(tune_path))
+    return DesignResult(cfg, str(log), tune_shown, str(spec_path), ident, tuned, cases,
                         plant, doubts, notes, timings, pairs)
