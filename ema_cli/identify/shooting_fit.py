@@ -85,19 +85,25 @@ class ShootingOutcome:
     segment_shift: np.ndarray | None = None  # estimate's move at the last lengthening (SI)
     runner_up_won: bool = False  # the runner-up start ended lower on the longest segments
     tie: dict[str, Any] | None = None  # the motor-angle tie at the estimate (tie_check)
-    covariance_segments: int = 0  # the clusters of the covariance (split_for_covariance)
-    fit_first: np.ndarray | None = None  # the first samples of those parts (the fit drawn)
+    fit_first: np.ndarray | None = None
+    """The first samples of the segments the fit is judged and drawn on: the clusters of the
+    covariance (the estimate's segments, or their parts: split_for_covariance)."""
     fell_back: bool = False  # the longest segments did not fit: the estimate is the anchor's
     segment_prediction: np.ndarray | None = None
     """The fit itself: every channel as the segments predict it, each segment simulated from
     its fitted start state, at the estimate [n_ch, n_samples] (SI)."""
+
+    @property
+    def covariance_segments(self) -> int:
+        """The clusters of the covariance (:attr:`fit_first`)."""
+        return int(self.search.sp.seg.n if self.fit_first is None else len(self.fit_first))
 
     def to_json(self) -> dict[str, Any]:
         s = self.search
         names = s.sp.base.names
         return {
             "segments": int(s.sp.seg.n), "lengthened_to_s": s.lengths,
-            "covariance_segments": int(self.covariance_segments or s.sp.seg.n),
+            "covariance_segments": self.covariance_segments,
             "fell_back_from_longest_segments": self.fell_back,
             "starts": int(s.starts_x.shape[0]),
             "finished_starts": {"cost": s.final_cost.tolist(),
@@ -316,8 +322,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                           confirmed=not reasons, reasons=reasons, timings=timings,
                           step_shift=shift, segment_shift=seg_shift,
                           stage_iterations=iters, runner_up_won=runner_won, tie=tie,
-                          covariance_segments=res_cov.sp.seg.n, fell_back=fell_back,
-                          fit_first=res_cov.sp.seg.first.copy(),
+                          fell_back=fell_back, fit_first=res_cov.sp.seg.first.copy(),
                           segment_prediction=seg_pred)
     if polish_iter <= 0:
         out.polish = {"kept": False, "why": "no polish (polish: false)"}

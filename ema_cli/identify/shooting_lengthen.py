@@ -47,6 +47,23 @@ def continue_at(res: ShootingSearch, dt: float, iterations: int) -> int:
     return int(st.iterations[0])
 
 
+def _reseat_on(res: ShootingSearch, seg: Any, dt: float, sweeps: int | None = None
+               ) -> tuple[Any, np.ndarray, float]:
+    """The estimate ``res`` on other segments ``seg``: each new segment starts from the state
+    of the old segment that started at or before its first sample, then chained
+    (:func:`chain_seat`, ``sweeps`` of them) -> (the new problem, its scaled unknowns, their
+    data cost)."""
+    from ema_cli.identify.shooting import ShootingProblem
+
+    sp = res.sp
+    sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie)
+    x, S = sp.unpack(res.V)
+    k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
+    kw = {} if sweeps is None else {"sweeps": sweeps}
+    V2, R2, _ = chain_seat(sp2, sp2.pack(x, S[k])[None], dt, **kw)
+    return sp2, V2[0], float(np.sum(R2[0, :sp2.n_data] ** 2))
+
+
 def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int,
                notes: dict[str, str] | None = None) -> int:
     """Continue the search's best start on segments of ``length`` [s] (in place): each new
@@ -63,22 +80,19 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int,
     incidental-parameter problem), but a longer horizon is harder to seat. Returns the LM
     iterations used (0: skipped, as when fewer than :data:`MIN_FIT_SEGMENTS` segments would
     be left)."""
-    from ema_cli.identify.shooting import ShootingProblem, make_segments
+    from ema_cli.identify.shooting import make_segments
 
     sp = res.sp
     seg = make_segments(sp.base.log.t, length)
     if seg.n >= sp.seg.n or seg.n < MIN_FIT_SEGMENTS:
         return 0
-    sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie)
-    x, S = sp.unpack(res.V)
-    k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
-    V2, _, _ = chain_seat(sp2, sp2.pack(x, S[k])[None], dt)
-    st = new_state(sp2, V2, dt)
+    sp2, V2, _ = _reseat_on(res, seg, dt)
+    st = new_state(sp2, V2[None], dt)
     lm_many(sp2, st, dt, iterations, stall_ratio=RESEAT_RATIO)
     keep = bool(st.cost[0] <= 1.05 * res.cost)
     if keep and notes is not None:
         r_short = sp.residuals_many(res.V[None], dt)[0][0, :sp.n_data]
-        r_long = sp2.residuals_many(st.V[:1], dt)[0][0, :sp2.n_data]
+        r_long = st.R[0, :sp2.n_data]  # the LM keeps the residuals of its point
         before = too_high(channel_ratios(sp.base, r_short), notes, CONFIRM_RATIO)
         after = too_high(channel_ratios(sp.base, r_long), notes, CONFIRM_RATIO)
         keep = not set(after) - set(before)
@@ -99,7 +113,7 @@ def split_for_covariance(res: ShootingSearch, dt: float, iterations: int = 4
     (``iterations`` of :func:`fit_states`; the parameters stay). Its covariance is that of the
     shorter segments' estimator (more free states, so no narrower than the longer
     segments'), evaluated at the estimate."""
-    from ema_cli.identify.shooting import Segments, ShootingProblem
+    from ema_cli.identify.shooting import Segments
     from ema_cli.identify.shooting_seat import fit_states
 
     sp = res.sp
@@ -110,17 +124,12 @@ def split_for_covariance(res: ShootingSearch, dt: float, iterations: int = 4
         f + np.round(np.arange(m) * (e - f) / m).astype(int)
         for f, e in zip(sp.seg.first, sp.seg.last, strict=True)]))
     seg = Segments(first, np.r_[first[1:], sp.seg.last[-1]])
-    sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie)
-    x, S = sp.unpack(res.V)
-    k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
-    V2, _, _ = chain_seat(sp2, sp2.pack(x, S[k])[None], dt, sweeps=m + 1)
-    x2, S2 = sp2.unpack(V2[0])
+    sp2, V, cost = _reseat_on(res, seg, dt, sweeps=m + 1)
     if iterations > 0:
-        S2, _ = fit_states(sp2, x2[None], S2[None], np.zeros(1, dtype=int), dt, iterations)
-        S2 = S2[0]
-    V = sp2.pack(x2, S2)
-    cost = float(np.sum(sp2.residuals_many(V[None], dt)[0][0, :sp2.n_data] ** 2))
-    return dataclasses.replace(res, sp=sp2, V=V, x=x2.copy(), cost=cost)
+        x2, S2 = sp2.unpack(V)
+        S2, c = fit_states(sp2, x2[None], S2[None], np.zeros(1, dtype=int), dt, iterations)
+        V, cost = sp2.pack(x2, S2[0]), float(np.sum(c[0]))
+    return dataclasses.replace(res, sp=sp2, V=V, x=sp2.unpack(V)[0], cost=cost)
 
 
 @dataclass

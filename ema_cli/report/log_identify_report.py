@@ -165,7 +165,7 @@ def _search_text(fit: ClosedLoopFit) -> str:
                 f"{tie['rms_over_se']:.3g} x their standard error (p = {tie['p_value']:.2g}). ")
     seg = (f"{s.sp.seg.n} segments of the log" if not s.lengths else
            f"segments lengthened to {s.lengths[-1]:g} s ({s.sp.seg.n} of them"
-           + ("" if ms.covariance_segments in (0, s.sp.seg.n) else
+           + ("" if ms.covariance_segments == s.sp.seg.n else
               f"; the covariance on {ms.covariance_segments} parts") + ")")
     if ms.fell_back:
         seg += (" (the longest segments did not fit at the fine step: the estimate is from "
