@@ -38,7 +38,7 @@ MAX_NOISE_PCT = 100.0  # the largest noise of synthetic data [% of the RMS]
 DEFAULT_STARTS = 8  # multiple shooting: Sobol starts over the bounds
 DEFAULT_SEGMENT_S = 0.05  # multiple shooting: segment length [s] (docs/identification.md)
 DEFAULT_MS_ITER = 60  # multiple shooting: most joint LM iterations of a start
-DEFAULT_LENGTHEN_S = (0.1, 0.2, 0.4, 0.8)  # multiple shooting: segments lengthened to these [s]
+DEFAULT_LENGTHEN_S = (0.1, 0.2, 0.4, 0.8, 1.6)  # multiple shooting: lengthened to these [s]
 MAX_STARTS = 256  # the most multiple-shooting starts
 
 
@@ -74,9 +74,10 @@ class ClosedLoopShooting(Strict):
     lengthen_s: list[PositiveFloat] = Field(
         default_factory=lambda: list(DEFAULT_LENGTHEN_S),
         description="longer segment lengths [s] the best start continues on, in order "
-                    "(fewer free states: less bias; a length that leaves fewer than 5 "
-                    "segments is skipped, and on fewer than 10 the covariance is taken on "
-                    "the segments cut into parts); [] for none")
+                    "(fewer free states: less bias and variance; a length that leaves fewer "
+                    "than 2 segments is skipped, as is one that costs the fit, and on fewer "
+                    "than 10 the covariance is taken on the segments cut into parts); [] for "
+                    "none")
     tie_motor_angle: bool = Field(
         True, description="tie each segment's motor angle to the integral of the logged motor "
                           "speed between segment starts (kinematics; needs omega_motor_rpm "

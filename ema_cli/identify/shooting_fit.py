@@ -148,10 +148,12 @@ def tie_check(res: ShootingSearch, r_tie: np.ndarray) -> dict[str, Any] | None:
             "p_value": p, "passes": p >= TIE_P}
 
 
-def ms_uncertainty(res: ShootingSearch, dt: float
+def ms_uncertainty(res: ShootingSearch, dt: float, recentre: bool = False
                    ) -> tuple[Uncertainty, np.ndarray, np.ndarray]:
     """Cluster-robust uncertainty of the multiple-shooting estimate (states profiled out) ->
-    (uncertainty, the data residuals at the estimate, the tie's)."""
+    (uncertainty, the data residuals at the estimate, the tie's); ``recentre`` for the
+    covariance split (the parts at the longer segments' estimate, not their own optimum:
+    :func:`ema_cli.identify.uncertainty.covariance_clustered`)."""
     sp = res.sp
     b = sp.base
     r, Jx, Js = sp.jacobian_many(res.V[None], dt)
@@ -167,7 +169,7 @@ def ms_uncertainty(res: ShootingSearch, dt: float
         for idx in clusters:
             coef, *_ = np.linalg.lstsq(Js[idx], Jx[idx], rcond=None)
             Jp[idx] = Jx[idx] - Js[idx] @ coef
-    cov, cond, dof = covariance_clustered(Jp, r, clusters)
+    cov, cond, dof = covariance_clustered(Jp, r, clusters, recentre)
     return (assess(b.names, res.x, cov, dof, cond, b.lower, b.upper), r[:sp.n_data],
             r[sp.n_data:])
 
@@ -242,7 +244,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     dt_unc = min(fine, dt_search)
     res, res_cov, shift, x_best_coarse, cost_coarse = refine_split(
         lg, fine, dt_search, refine_iter, iters, "refine", report)
-    unc_ms, r_ms, r_tie = ms_uncertainty(res_cov, dt_unc)
+    unc_ms, r_ms, r_tie = ms_uncertainty(res_cov, dt_unc, res_cov is not res)
     fell_back = False
     if lg.anchor is not None and too_high(channel_ratios(problem, r_ms), notes, CONFIRM_RATIO):
         # the longest segments do not fit at the fine step where the last ones with enough
@@ -250,7 +252,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
         # 1.47 x its floor after the refinement): those refined too, and kept if they fit
         a = refine_split(lg.anchor, fine, dt_search, refine_iter, iters, "refine_anchor",
                          report)
-        unc_a, r_a, r_tie_a = ms_uncertainty(a[1], dt_unc)
+        unc_a, r_a, r_tie_a = ms_uncertainty(a[1], dt_unc, a[1] is not a[0])
         if not too_high(channel_ratios(problem, r_a), notes, CONFIRM_RATIO):
             lg, fell_back = lg.anchor, True
             res, res_cov, shift, x_best_coarse, cost_coarse = a

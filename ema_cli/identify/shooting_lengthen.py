@@ -27,12 +27,17 @@ MIN_SEGMENTS = 10
 fewer than there are clusters, and its variance estimate is the spread of as many
 deletions): when the estimate ends on fewer segments, its covariance is taken on each of its
 segments cut into equal parts (:func:`split_for_covariance`) [-]."""
-MIN_FIT_SEGMENTS = 5
+MIN_FIT_SEGMENTS = 2
 """A lengthening that would leave fewer segments is skipped [-]. Longer segments leave fewer
-free states and so less of their bias (measured on the independent battery: 0.4 -> 0.8 s
-moved stated-law kL errors of +0.51 and +0.57 % to +0.03 and +0.43 %), but 5 clusters are
-too few for a covariance (a 5-cluster jackknife gave one log kL +-0.25 % around an error of
-+0.51 %): hence the split."""
+free states and so less of their bias and variance: at the truth of the independent
+battery's stated-law logs, the information bound of kL on log06 (a 1 kHz chirp, 1.6 %
+noise) is 0.33 % (one standard deviation) on 0.4 s segments, 0.25 % on 0.8 s, 0.10 % on
+1.6 s and 0.09 % for the whole log from rest (experiments/identify_crb.py); 0.4 -> 0.8 s
+moved kL errors of +0.51 and +0.57 % to +0.03 and +0.43 %, and 0.8 -> 1.6 s log06's +0.61 %
+to +0.09 %. Few segments are too few clusters for a covariance (a 5-cluster jackknife gave
+one log kL +-0.25 % around an error of +0.51 %): hence the split. A lengthening that costs
+the fit is refused (:func:`lengthened`), so logs whose long horizons the model cannot
+follow (a multisine with the jump law: impact timing) stay on shorter segments."""
 
 
 def continue_at(res: ShootingSearch, dt: float, iterations: int) -> int:
@@ -112,7 +117,8 @@ def split_for_covariance(res: ShootingSearch, dt: float, iterations: int = 4
     others along), then the parts' states are fitted for the estimate's parameters
     (``iterations`` of :func:`fit_states`; the parameters stay). Its covariance is that of the
     shorter segments' estimator (more free states, so no narrower than the longer
-    segments'), evaluated at the estimate."""
+    segments'), evaluated at the estimate, with the clusters' scores taken at the parts' own
+    (linearised) optimum (:func:`ema_cli.identify.uncertainty.covariance_clustered`)."""
     from ema_cli.identify.shooting import Segments
     from ema_cli.identify.shooting_seat import fit_states
 

@@ -114,8 +114,8 @@ def _sandwich(J: np.ndarray, meat: Callable[[np.ndarray], np.ndarray]
     return cov, cond
 
 
-def covariance_clustered(J: np.ndarray, r: np.ndarray, clusters: Sequence[np.ndarray]
-                         ) -> tuple[np.ndarray, float, int]:
+def covariance_clustered(J: np.ndarray, r: np.ndarray, clusters: Sequence[np.ndarray],
+                         recentre: bool = False) -> tuple[np.ndarray, float, int]:
     """The cluster-robust covariance of a least-squares estimate -> (cov[p, p], cond, dof).
 
     ``clusters`` are index arrays of the residuals (e.g. the samples of every channel in one
@@ -129,15 +129,27 @@ def covariance_clustered(J: np.ndarray, r: np.ndarray, clusters: Sequence[np.nda
     cluster fits its own residuals); CR3 does not. ``dof = G - 1`` for Student's t (G
     clusters). Near-null directions of the column-scaled J get an infinite variance, as in
     :func:`covariance`.
+
+    ``recentre``: the scores are taken at the optimum of the linearised problem (``r``
+    projected off J's columns), for a point that is by construction not this problem's
+    optimum: the covariance split evaluates shorter segments at the longer ones' estimate,
+    and every cluster's score then shares the step back to the parts' optimum, which is no
+    spread (measured: a 2 s-segment estimate 0.5 % from the 0.4 s parts' optimum in kL had
+    its kL interval inflated 2.9x). Not at a fitted optimum: there what is left of a score's
+    common part is the cost's roughness (a jump-law multisine log's contact timing) and the
+    plain jackknife keeps it (measured: recentred there, one such log's kL interval shrank
+    from +-0.24 to +-0.025 % and missed its truth).
     """
     G = len(clusters)
 
     def meat(Js: np.ndarray) -> np.ndarray:
         A = Js.T @ Js
         B = np.zeros_like(A)
+        # recentre: the residuals at the optimum of the linearised problem
+        r_opt = r - Js @ np.linalg.lstsq(Js, r, rcond=None)[0] if recentre else r
         for idx in clusters:
             Jk = Js[idx]
-            d = np.linalg.lstsq(A - Jk.T @ Jk, Jk.T @ r[idx], rcond=None)[0]
+            d = np.linalg.lstsq(A - Jk.T @ Jk, Jk.T @ r_opt[idx], rcond=None)[0]
             g = A @ d  # A^-1 B A^-1 then sums d_k d_k^T
             B += np.outer(g, g)
         return B * ((G - 1) / max(G, 1))
