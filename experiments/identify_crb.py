@@ -32,15 +32,12 @@ from experiments.identify_battery import NAMES, TOL_STATED, TOL_UNSTATED, plan
 DRAWS = 20_000  # Monte Carlo draws of the Gaussian estimator per log
 
 
-def _channels(r: np.ndarray, n: int, n_ch: int) -> np.ndarray:
-    return np.array([np.sqrt(np.mean(r[c * n:(c + 1) * n] ** 2)) for c in range(n_ch)])
-
-
 def bounds(path: Path, plant: dict, truth: dict, lengths: list[float]) -> list[dict]:
     """The bound of one log: one row for the whole log, one per segment length."""
     from ema_cli.identify.closed_loop import load_log
     from ema_cli.identify.closed_loop_fit import build_problem
     from ema_cli.identify.log_settings import ClosedLoopSettings
+    from ema_cli.identify.shooting_quality import channel_ratios
     from ema_cli.identify.shooting_search import build
     from ema_cli.identify.shooting_seat import start_states
     from ema_cli.identify.whole_log import fd_jacobian
@@ -49,10 +46,10 @@ def bounds(path: Path, plant: dict, truth: dict, lengths: list[float]) -> list[d
     names, span = list(pb.names), pb.upper - pb.lower
     x = np.array([truth.get(n, 0.5 * (pb.lower[k] + pb.upper[k]))
                   for k, n in enumerate(names)])
-    n, n_ch = pb.log.n, len(pb.channels)
+    n = pb.log.n
     rows = []
     r, J = fd_jacobian(pb, x)
-    q = _channels(r, n, n_ch)
+    q = np.array(list(channel_ratios(pb, r).values()))
     w = np.repeat(1.0 / np.maximum(q, 1e-3), n)
     cov = np.linalg.pinv((J * w[:, None]).T @ (J * w[:, None]))
     rows.append(("whole log", 1, q, cov))
@@ -60,23 +57,21 @@ def bounds(path: Path, plant: dict, truth: dict, lengths: list[float]) -> list[d
         sp = build(pb, length, x, tie=True)
         V = start_states(sp, x[None], pb.dt)[:1]
         r0, Jx, Js = (a[0] for a in sp.jacobian_many(V, pb.dt))
-        qm = _channels(r0, n, n_ch)
+        qm = np.array(list(channel_ratios(pb, r0[:sp.n_data]).values()))
         wt = np.concatenate([np.repeat(1.0 / np.maximum(qm, 1e-3), n),
                              np.ones(r0.shape[0] - sp.n_data)])
         Jf = np.hstack([Jx, sp.full_state_jacobian(Js, V[0])]) * wt[:, None]
         cov_u = np.linalg.pinv(Jf.T @ Jf)[:sp.p, :sp.p]
         rows.append((f"{length:g} s", sp.seg.n, qm, cov_u * np.outer(span, span)))
+    k4 = [names.index(m) for m in NAMES]
     out = []
     for label, n_seg, ratios, c in rows:
         out.append({"estimator": label, "segments": n_seg,
                     **{f"ratio_{ch}": float(v) for ch, v in zip(pb.channels, ratios,
                                                                 strict=True)},
                     **{f"{m}_sd_pct": float(100.0 * np.sqrt(max(c[k, k], 0.0)) / abs(x[k]))
-                       for k, m in enumerate(names) if m in NAMES},
-                    "_cov_pct": c[np.ix_([names.index(m) for m in NAMES],
-                                         [names.index(m) for m in NAMES])]
-                    / np.outer(x[[names.index(m) for m in NAMES]],
-                               x[[names.index(m) for m in NAMES]]) * 1e4})
+                       for k, m in zip(k4, NAMES, strict=True)},
+                    "_cov_pct": c[np.ix_(k4, k4)] / np.outer(x[k4], x[k4]) * 1e4})
     return out
 
 

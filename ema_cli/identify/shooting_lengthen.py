@@ -33,7 +33,7 @@ free states and so less of their bias and variance: at the truth of the independ
 battery's stated-law logs, the information bound of kL on log06 (a 1 kHz chirp, 1.6 %
 noise) is 0.33 % (one standard deviation) on 0.4 s segments, 0.25 % on 0.8 s, 0.10 % on
 1.6 s and 0.09 % for the whole log from rest (experiments/identify_crb.py); 0.4 -> 0.8 s
-moved kL errors of +0.51 and +0.57 % to +0.03 and +0.43 %, and 0.8 -> 1.6 s log06's +0.61 %
+moved kL errors of +0.51 and +0.57 % to +0.08 and +0.42 %, and 0.8 -> 1.6 s log06's +0.61 %
 to +0.09 %. Few segments are too few clusters for a covariance (a 5-cluster jackknife gave
 one log kL +-0.25 % around an error of +0.51 %): hence the split. A lengthening that costs
 the fit is refused (:func:`lengthened`), so logs whose long horizons the model cannot

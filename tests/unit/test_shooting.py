@@ -75,19 +75,26 @@ def test_cluster_robust_covariance_is_the_ordinary_one_for_white_residuals():
     assert np.all(np.diag(robust) > 20 * np.diag(ordinary))
 
 
-def test_cluster_robust_covariance_is_the_delete_one_cluster_jackknife():
-    """A linear least-squares problem, 12 clusters, the third parameter carried mostly by
-    the first cluster: the covariance equals (G-1)/G sum_k d_k d_k^T with d_k the move of the
-    estimate when cluster k is left out, computed here by 12 separate regressions; the plain
-    sandwich (CR1) understates that parameter's variance."""
+def _leveraged_linear_problem():
+    """A linear least-squares problem in 12 clusters of 40, the third parameter carried
+    mostly by the first cluster -> (J, y, its optimum beta, the clusters)."""
     rng = np.random.default_rng(3)
     G, n, p = 12, 40, 3
     J = rng.normal(size=(G * n, p))
     J[n:, 2] *= 0.1
     y = J @ np.array([1.0, -2.0, 0.5]) + rng.normal(size=G * n)
     beta = np.linalg.lstsq(J, y, rcond=None)[0]
+    return J, y, beta, np.array_split(np.arange(G * n), G)
+
+
+def test_cluster_robust_covariance_is_the_delete_one_cluster_jackknife():
+    """A linear least-squares problem, 12 clusters, the third parameter carried mostly by
+    the first cluster: the covariance equals (G-1)/G sum_k d_k d_k^T with d_k the move of the
+    estimate when cluster k is left out, computed here by 12 separate regressions; the plain
+    sandwich (CR1) understates that parameter's variance."""
+    J, y, beta, clusters = _leveraged_linear_problem()
+    G = len(clusters)
     r = J @ beta - y  # the residuals (model - data) and J = dr/dbeta
-    clusters = np.array_split(np.arange(G * n), G)
     d = [np.linalg.lstsq(np.delete(J, c, axis=0), np.delete(y, c), rcond=None)[0] - beta
          for c in clusters]
     jackknife = (G - 1) / G * sum(np.outer(v, v) for v in d)
@@ -106,13 +113,7 @@ def test_cluster_robust_covariance_off_the_optimum_is_the_one_at_it():
     clusters' scores there lose the step back to the optimum they share, which is no spread,
     and the covariance is the jackknife's at the optimum to rounding; the scores at the
     point itself inflate the high-leverage parameter's variance by more than half."""
-    rng = np.random.default_rng(3)
-    G, n, p = 12, 40, 3
-    J = rng.normal(size=(G * n, p))
-    J[n:, 2] *= 0.1
-    y = J @ np.array([1.0, -2.0, 0.5]) + rng.normal(size=G * n)
-    beta = np.linalg.lstsq(J, y, rcond=None)[0]
-    clusters = np.array_split(np.arange(G * n), G)
+    J, y, beta, clusters = _leveraged_linear_problem()
     at_opt, *_ = covariance_clustered(J, J @ beta - y, clusters)
     off = beta + 3.0 * np.sqrt(np.diag(at_opt))
     cov, *_ = covariance_clustered(J, J @ off - y, clusters, recentre=True)
