@@ -41,9 +41,8 @@ def compile_unit(name: str, quiet: bool = False) -> float:
         return time.perf_counter() - t0
     from ema_cli.sim.runner import load_kernel
 
-    base, f, e = name.split("/")
-    load_kernel(base.endswith("parallel"), 16 if base.startswith("lanes") else 1,
-                int(f[-1]), e.endswith("1"))
+    base, v = name.split("/")
+    load_kernel(base.endswith("parallel"), 16 if base.startswith("lanes") else 1, int(v[1:]))
     return time.perf_counter() - t0
 
 

@@ -88,14 +88,17 @@ class Simulation:
         col = signal_column(name)
         if self.batch.signals is None:
             raise EmaError("no signals were recorded (simulation.output_interval_s is null)")
-        return self.batch.signals[0, :, SIGNALS.index(col)] * col.factor
+        k = SIGNALS.index(col)
+        if k >= self.batch.signals.shape[2]:
+            raise EmaError(f"signal {name!r} is not recorded for this actuator")
+        return self.batch.signals[0, :, k] * col.factor
 
     def table(self) -> dict[str, np.ndarray]:
         """``t_s`` and every recorded signal in edge units (the columns of timeseries.csv)."""
         if self.batch.signals is None:
             raise EmaError("no signals were recorded (simulation.output_interval_s is null)")
         out = {"t_s": self.t}
-        for j, c in enumerate(SIGNALS):
+        for j, c in enumerate(self.batch.columns):
             out[c.edge] = self.batch.signals[0, :, j] * c.factor
         return out
 

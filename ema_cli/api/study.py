@@ -75,7 +75,10 @@ class Sweep:
             sig = self.result.signals(job)
         except KeyError as exc:
             raise EmaError(str(exc.args[0])) from None
-        return sig[:, SIGNALS.index(col)] * col.factor
+        k = SIGNALS.index(col)
+        if k >= sig.shape[1]:
+            raise EmaError(f"signal {name!r} is not recorded for this actuator")
+        return sig[:, k] * col.factor
 
     def to_pandas(self, form: str = "long") -> pd.DataFrame:
         """Every finished job's signals with its id and swept values: ``long`` (``job``, swept

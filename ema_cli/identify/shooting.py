@@ -32,10 +32,16 @@ from typing import Any
 import numpy as np
 
 from ema_cli.identify.closed_loop import CHANNELS, ON_GRID_TOL, OVERSAMPLE, ClosedLoopProblem
-from ema_cli.model.params import INDEX, INITIAL_STATE, to_row
+from ema_cli.model.params import INDEX, to_row
 
-N_X = len(INITIAL_STATE)  # states per segment start (model.plant.STATES order)
-VAR_STATES = (0, 1, 2, 3, 4, 6)  # the states estimated per segment (positions in STATES)
+SEGMENT_STATES = ("theta_m", "w_m", "i", "theta_L", "w_L", "z", "xI")
+"""The states of a segment start (``model.states.STATES`` by name: the paper's EMA's, the
+actuator this fit identifies); a segment's other states start at their initial values."""
+N_X = len(SEGMENT_STATES)  # states per segment start
+VAR_STATES = tuple(SEGMENT_STATES.index(n) for n in ("theta_m", "w_m", "i", "theta_L", "w_L",
+                                                     "xI"))
+"""The states estimated per segment (positions in :data:`SEGMENT_STATES`)."""
+_X0 = {n: INDEX[f"x0_{n}"] for n in SEGMENT_STATES}  # their initial-state columns of P
 GAP_FLOOR = 1e-5  # the gap position q is the deflection over (alpha + this) [rad]
 Q_SCALE = 0.05  # the scale of the gap position q [-]
 NV = len(VAR_STATES)
@@ -158,7 +164,7 @@ class ShootingProblem:
         """Tie residuals ``[m, n_seg-1]`` of m candidates from their parameter rows
         (``m*n_seg``, candidate after candidate; the motor angle in its x0 column)."""
         d_i, s_i = self.tie_data()
-        th = rows[:, INDEX[INITIAL_STATE[0]]].reshape(m, self.seg.n)
+        th = rows[:, _X0["theta_m"]].reshape(m, self.seg.n)
         return (d_i[None] - np.diff(th, axis=1)) / s_i[None]
 
     def tie_state_jacobian(self, v: np.ndarray) -> np.ndarray:
@@ -298,10 +304,9 @@ class ShootingProblem:
         prm = self.base.params(x) if prm is None else prm
         base = np.array(to_row(prm))
         rows = np.repeat(base[None], S.shape[0], axis=0)
-        c0 = INDEX[INITIAL_STATE[0]]
-        rows[:, [c0 + k for k in VAR_STATES]] = S
-        rows[:, c0] = prm["m"] * (S[:, 3] + S[:, 0] * (prm["alpha"] + GAP_FLOOR))
-        rows[:, c0 + 5] = steady_z(prm, S[:, 1])
+        rows[:, [_X0[SEGMENT_STATES[k]] for k in VAR_STATES]] = S
+        rows[:, _X0["theta_m"]] = prm["m"] * (S[:, 3] + S[:, 0] * (prm["alpha"] + GAP_FLOOR))
+        rows[:, _X0["z"]] = steady_z(prm, S[:, 1])
         return rows
 
     def _gather(self) -> tuple[np.ndarray, np.ndarray]:

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ema_cli.errors import EmaError
+from ema_cli.model.states import STATES
 from ema_cli.units import DEG
 
 
@@ -31,9 +32,26 @@ class Param:
     description: str
     choices: Mapping[str, float] | None = None
     nonnegative: bool = True
+    side: str = ""
+    """``load``: a load-side quantity, in the axis's units (rad or m: ``units.axis_unit``);
+    otherwise motor side (always rotary), electrical or dimensionless."""
+    limit: bool = False
+    """A limit: ``inf`` (or the words off, none, inf) means no limit."""
 
 
 DAMPING_CHOICES = {"contact": 0.0, "paper": 1.0}
+FRICTION_CHOICES = {"off": 0.0, "lugre": 1.0, "static": 2.0}
+"""Friction laws of a site: 0 none, 1 LuGre (dynamic, bristles), 2 static (Coulomb, Stribeck and
+viscous per direction, with stiction: ``model.friction``); ``on`` reads as ``lugre``."""
+DRIVE_CHOICES = {"armature": 0.0, "amplifier": 1.0}
+CTRL_CHOICES = {"paper": 0.0, "discrete": 1.0, "none": 2.0}
+VSRC_CHOICES = {"encoder": 0.0, "sensor": 1.0}
+PLANT_INPUT_CHOICES = {"command": 0.0, "force": 1.0, "current": 2.0}
+ON_OFF_CHOICES = ("friction", "friction_L")
+"""Enumerated parameters that also read on/off (on: LuGre, as before the static law existed)."""
+MAX_FIR = 8  # taps of the discrete cascade's position FIR [-]
+MAX_DIFF = 16  # longest position difference of the discrete cascade's velocity [samples]
+MAX_DELAY = 8  # longest computation delay of the discrete cascade [samples]
 """Transmission damping forms: 0 = contact (T never pulls, 0 inside the gap), 1 = paper Eq. 2."""
 CONTACT_TAU = 1.0e-4  # contact form: damping ramp-in time at impact (docs/model.md §2) [s]
 CONTACT_PEN = 1.0e-3  # contact form: reference penetration of the Hunt-Crossley share [rad]
@@ -90,15 +108,17 @@ PARAMS: tuple[Param, ...] = (
     Param("notch_depth", "-", 0.1, "notch gain at its centre, zeta_z/zeta_p in [0, 1]"),
     Param("notch_zeta", "-", 0.5, "notch width: damping of its poles zeta_p"),
     # saturations (inf = removed)
-    Param("sat1", "rad/s", 800.0 * DEG, "position-regulator output limit (load speed)"),
-    Param("sat2", "V", 40.0, "speed-regulator output limit (voltage demand)"),
-    Param("sat3", "A", 6.07 * 5.0, "current limit"),
+    Param("sat1", "rad/s", 800.0 * DEG, "position-regulator output limit (load speed)",
+          side="load", limit=True),
+    Param("sat2", "V", 40.0, "speed-regulator output limit (voltage demand)", limit=True),
+    Param("sat3", "A", 6.07 * 5.0, "current limit", limit=True),
     # dead zones
     Param("d1", "V", 0.0, "amplifier input dead zone half-width"),
     Param("d3", "rad/s", 0.0, "speed sensor dead zone half-width (motor speed)"),
     Param("d4", "rad", 0.0, "position sensor dead zone half-width (load angle)"),
     # LuGre friction at the motor shaft
-    Param("friction", "-", 0.0, "LuGre friction at the motor shaft: 0 off, 1 on"),
+    Param("friction", "-", 0.0, "friction at the motor shaft: off | lugre (on) | static "
+          "(Coulomb, Stribeck, viscous per direction, with stiction)", choices=FRICTION_CHOICES),
     Param("Fc", "N*m", 0.02, "Coulomb friction"),
     Param("Fs", "N*m", None, "static friction; default 1.5*Fc"),
     Param("vs", "rad/s", 1.0, "Stribeck velocity"),
@@ -116,18 +136,84 @@ PARAMS: tuple[Param, ...] = (
     Param("Ts", "s", 0.0, "controller sample time (0: continuous); a whole multiple of dt"),
     Param("q_pos", "rad", 0.0, "position sensor quantum, 2*pi/counts per rev (0: none)"),
     Param("q_speed", "rad/s", 0.0, "speed sensor resolution (0: none)"),
+    # ---- the actuator description (docs/model.md §3; config section `actuator`) ----
+    # structure: each choice selects a kernel variant (sim.kernel.variant_codes)
+    Param("rigid", "-", 0.0, "transmission: 0 compliant (motor and load coupled by kL, c, "
+          "alpha), 1 rigid (one mass JL + m^2*Jm in load coordinates)"),
+    Param("drive", "-", 0.0, "drive: armature (voltage in, R, L, Ke, Kt, current limit) | "
+          "amplifier (command in, force or torque out: amp_gain, amp_limit, amp_tau)",
+          choices=DRIVE_CHOICES),
+    Param("amp_gain", "N*m/V", 1.0, "amplifier gain, load side: force (torque) on the axis per "
+          "unit of command, transmission included", side="load"),
+    Param("amp_limit", "N*m", math.inf, "amplifier output limit, load side (inf: none)",
+          side="load", limit=True),
+    Param("amp_tau", "s", 0.0, "amplifier first-order time constant (0: instantaneous)"),
+    Param("offset", "N*m", 0.0, "constant offset force (torque) on the load opposing +theta_L "
+          "(gravity, bias; the EMPS benchmark's OF)", nonnegative=False, side="load"),
+    # the static friction law (friction = static) at the motor: Fc, Fs, vs, delta, sigma2 above
+    # are the + direction's; these the - direction's (default: the same)
+    Param("Fc_neg", "N*m", None, "motor Coulomb friction moving in -x (static law; default Fc)"),
+    Param("Fs_neg", "N*m", None, "motor breakaway friction moving in -x (static law; default Fs)"),
+    Param("sigma2_neg", "N*m*s/rad", None, "motor viscous friction moving in -x (static law; "
+          "default sigma2)"),
+    # friction at the load: off | lugre | static, its own parameters (load side)
+    Param("friction_L", "-", 0.0, "friction at the load: off | lugre | static (Coulomb, "
+          "Stribeck, viscous with stiction)", choices=FRICTION_CHOICES),
+    Param("Fc_L", "N*m", 0.0, "load Coulomb friction (+x)", side="load"),
+    Param("Fs_L", "N*m", None, "load breakaway (static) friction (+x); default Fc_L",
+          side="load"),
+    Param("vs_L", "rad/s", 0.0, "load Stribeck velocity (0: Coulomb, no Stribeck curve; LuGre "
+          "needs > 0)", side="load"),
+    Param("delta_L", "-", 1.0, "load Stribeck exponent"),
+    Param("Fv_L", "N*m*s/rad", 0.0, "load viscous friction coefficient (+x)", side="load"),
+    Param("Fc_L_neg", "N*m", None, "load Coulomb friction moving in -x; default Fc_L",
+          side="load"),
+    Param("Fs_L_neg", "N*m", None, "load breakaway friction moving in -x; default Fs_L",
+          side="load"),
+    Param("Fv_L_neg", "N*m*s/rad", None, "load viscous friction moving in -x; default Fv_L",
+          side="load"),
+    Param("sigma0_L", "N*m/rad", None, "load LuGre bristle stiffness; default Fc_L/1e-3",
+          side="load"),
+    Param("sigma1_L", "N*m*s/rad", None, "load LuGre bristle damping; default "
+          "2*0.5*sqrt(sigma0_L*JL)", side="load"),
+    # controller: the paper's cascade, a described discrete cascade, or none (plant only)
+    Param("ctrl", "-", 0.0, "controller: paper (position P, speed PI, current limit; "
+          "continuous or sampled at Ts) | discrete (the described cascade dc_*, sampled at Ts) | "
+          "none (plant only: the actuation is the run's input signal)", choices=CTRL_CHOICES),
+    Param("dc_kp", "1/s", 0.0, "discrete cascade: position gain (velocity command per position "
+          "error)"),
+    Param("dc_ki", "1/s^2", 0.0, "discrete cascade: position integral gain (0: P)"),
+    Param("dc_vmax", "rad/s", math.inf, "discrete cascade: velocity command limit (inf: none)",
+          side="load", limit=True),
+    Param("dc_kv", "V*s/rad", 0.0, "discrete cascade: velocity gain (command per velocity "
+          "error)", side="load"),
+    Param("dc_kvi", "V/rad", 0.0, "discrete cascade: velocity integral gain (0: P)",
+          side="load"),
+    Param("dc_umax", "V", math.inf, "discrete cascade: output limit (inf: none)", limit=True),
+    Param("dc_vsrc", "-", 0.0, "discrete cascade velocity source: encoder (a difference of the "
+          "position over dc_ndiff samples, after the FIR dc_fir*) | sensor (the motor speed "
+          "sensor over the ratio)", choices=VSRC_CHOICES),
+    Param("dc_ndiff", "-", 1.0, "discrete cascade: samples the position difference spans "
+          f"(1..{MAX_DIFF})"),
+    *(Param(f"dc_fir{k}", "-", 1.0 if k == 0 else 0.0, f"discrete cascade: FIR tap {k} on the "
+            "measured position before the difference (default: 1, 0, ...: none)",
+            nonnegative=False) for k in range(MAX_FIR)),
+    Param("dc_vfc", "Hz", 0.0, "discrete cascade: first-order low-pass on the velocity estimate "
+          "(0: none)"),
+    Param("dc_delay", "-", 0.0, f"computation delay: the command applied this many samples "
+          f"after it is computed (0..{MAX_DELAY}; discrete cascade)"),
+    Param("dist_out", "-", 0.0, "the run's input signal is a disturbance added to the "
+          "controller output (after its limit and delay): 0 no, 1 yes"),
+    Param("plant_input", "-", 0.0, "controller none: the input signal is the drive command "
+          "(command), the force (torque) on the load (force) or the armature current (current)",
+          choices=PLANT_INPUT_CHOICES),
     # initial state (default: at rest at 0); a closed-loop fit starts its log segments here
-    Param("x0_theta_m", "rad", 0.0, "initial motor angle", nonnegative=False),
-    Param("x0_w_m", "rad/s", 0.0, "initial motor speed", nonnegative=False),
-    Param("x0_i", "A", 0.0, "initial armature current", nonnegative=False),
-    Param("x0_theta_L", "rad", 0.0, "initial load angle", nonnegative=False),
-    Param("x0_w_L", "rad/s", 0.0, "initial load speed", nonnegative=False),
-    Param("x0_z", "rad", 0.0, "initial LuGre bristle deflection", nonnegative=False),
-    Param("x0_xI", "rad", 0.0, "initial speed-PI integral", nonnegative=False),
+    *(Param(f"x0_{st.name}", st.unit, 0.0, f"initial {st.description}", nonnegative=False,
+            side=st.side if st.side == "load" else "") for st in STATES),
 )
-INITIAL_STATE = ("x0_theta_m", "x0_w_m", "x0_i", "x0_theta_L", "x0_w_L", "x0_z", "x0_xI")
-"""The initial-state parameters, in the order of ``model.plant.STATES``."""
-FLAGS = ("friction", "locked")
+INITIAL_STATE = tuple(f"x0_{st.name}" for st in STATES)
+"""The initial-state parameters, in the order of ``model.states.STATES``."""
+FLAGS = ("locked", "rigid", "dist_out")
 CONTROLLER_PARAMS = ("Kpp", "Kps", "Kis", "fb_motor", "dzi_v", "dzi_band", "ff_fc", "ff_fs",
                      "ff_vs", "ff_sigma2", "ff_sigma0", "ff_sigma1", "ff_band", "notch_hz",
                      "notch_depth", "notch_zeta")
@@ -157,11 +243,19 @@ def check_value(name: str, value: object) -> float:
         raise EmaError(f"unknown model parameter '{name}'; expected one of: {', '.join(INDEX)}")
     spec = BY_NAME[name]
     if spec.choices is not None:
-        if isinstance(value, str) and value in spec.choices:
-            return spec.choices[value]
-        raise EmaError(f"parameter '{name}' must be one of {sorted(spec.choices)}, got {value!r}")
+        word = value.strip().lower() if isinstance(value, str) else value
+        if isinstance(word, str) and word in spec.choices:
+            return spec.choices[word]
+        if name in ON_OFF_CHOICES and (isinstance(word, bool)
+                                       or word in ("on", "true", "off", "false", "none")):
+            return 1.0 if word in (True, "on", "true") else 0.0
+        if (isinstance(word, int | float) and not isinstance(word, bool)
+                and float(word) in spec.choices.values()):
+            return float(word)
+        words = ", ".join(f"{k} ({v:g})" for k, v in spec.choices.items())
+        raise EmaError(f"parameter '{name}' must be one of {words}, got {value!r}")
     if isinstance(value, str) and value.strip().lower() in ("off", "inf", "none", "false"):
-        if name.startswith("sat"):
+        if spec.limit:
             return math.inf
         if name in FLAGS:
             return 0.0
@@ -180,7 +274,7 @@ def check_value(name: str, value: object) -> float:
         raise EmaError(f"parameter '{name}' is NaN; expected a number in {spec.unit}")
     if spec.nonnegative and x < 0:
         raise EmaError(f"parameter '{name}' must be >= 0 ({spec.unit}), got {x}")
-    if math.isinf(x) and not name.startswith("sat"):
+    if math.isinf(x) and not spec.limit:
         raise EmaError(f"parameter '{name}' must be finite ({spec.unit}), got {x}")
     return x
 
@@ -228,7 +322,59 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
             raise EmaError(f"parameter '{flag}' must be 0/off or 1/on, got {values[flag]}")
     if values["friction"] == 1.0 and (values["Fc"] <= 0 or values["vs"] <= 0):  # type: ignore[operator]
         raise EmaError("LuGre friction needs Fc > 0 and vs > 0")
+    _resolve_description(values)
     return {k: float(v) for k, v in values.items()}  # type: ignore[arg-type]
+
+
+DEFAULTS_FROM = {"Fc_neg": "Fc", "Fs_neg": "Fs", "sigma2_neg": "sigma2", "Fs_L": "Fc_L",
+                 "Fc_L_neg": "Fc_L", "Fs_L_neg": "Fs_L", "Fv_L_neg": "Fv_L"}
+"""Parameters whose default is another's value (the - direction's friction the + one's)."""
+
+
+def _whole(values: Mapping[str, float | None], name: str, lo: int, hi: int, what: str) -> None:
+    x = values[name]
+    if x is None or x != math.floor(x) or not lo <= x <= hi:
+        raise EmaError(f"parameter '{name}' ({what}) must be a whole number in {lo}..{hi}, got "
+                       f"{x:g}")
+
+
+def _resolve_description(values: dict[str, float | None]) -> None:
+    """Fill the derived parameters of the actuator description's elements and check that they
+    make one actuator (in place)."""
+    for name, source in DEFAULTS_FROM.items():
+        if values[name] is None:
+            values[name] = values[source]
+    if values["sigma0_L"] is None:
+        values["sigma0_L"] = SIGMA0_PER_FC * values["Fc_L"]  # type: ignore[operator]
+    if values["sigma1_L"] is None:
+        values["sigma1_L"] = (2.0 * BRISTLE_DAMPING_RATIO
+                              * math.sqrt(values["sigma0_L"] * values["JL"]))  # type: ignore[operator]
+    v = values
+    for site, (fc, fs, fcn, fsn) in (("friction", ("Fc", "Fs", "Fc_neg", "Fs_neg")),
+                                     ("friction_L", ("Fc_L", "Fs_L", "Fc_L_neg", "Fs_L_neg"))):
+        if v[site] == 2.0:
+            for a, b in ((fs, fc), (fsn, fcn)):
+                if v[a] < v[b]:  # type: ignore[operator]
+                    raise EmaError(f"parameter '{a}' (breakaway friction, {v[a]:g}) must be >= "
+                                   f"'{b}' (Coulomb friction, {v[b]:g}) for the static law")
+    if v["friction_L"] == 1.0 and (v["Fc_L"] <= 0 or v["vs_L"] <= 0):  # type: ignore[operator]
+        raise EmaError("LuGre friction at the load needs Fc_L > 0 and vs_L > 0")
+    if v["rigid"] == 1.0:
+        if v["alpha"]:
+            raise EmaError(f"parameter 'alpha' (backlash, {v['alpha']:g} rad) needs a compliant "
+                           "transmission; a rigid one (rigid = 1) has none")
+        if v["locked"]:
+            raise EmaError("a locked motor (locked = 1) needs a compliant transmission: on a "
+                           "rigid one (rigid = 1) the load is locked too")
+    if v["ctrl"] == 1.0:
+        if not v["Ts"]:
+            raise EmaError("the discrete cascade (ctrl = discrete) needs a sample time Ts > 0 "
+                           "(controller.sample_time_s)")
+        _whole(v, "dc_ndiff", 1, MAX_DIFF, "samples of the velocity's position difference")
+        _whole(v, "dc_delay", 0, MAX_DELAY, "computation delay in samples")
+    elif v["dc_delay"]:
+        raise EmaError("parameter 'dc_delay' (a computation delay) needs the discrete cascade "
+                       "(ctrl = discrete)")
 
 
 def to_row(values: Mapping[str, float]) -> list[float]:

@@ -36,7 +36,7 @@ from ema_cli import __version__
 from ema_cli.errors import EmaError
 from ema_cli.files import AtomicFile
 from ema_cli.report.sweep_tables import axis_unit
-from ema_cli.sim.tables import N_SIGNALS, SIGNALS, Column
+from ema_cli.sim.tables import SIGNALS, Column
 from ema_cli.sweep.run import JOB_COLUMN, TIME_COLUMN
 from ema_cli.units import DEG, RPM
 
@@ -90,12 +90,14 @@ class SignalsWriter:
             else:
                 self._numeric[c] = np.array(values, dtype=np.float64)
         swept = self._swept
-        width = 2 + len(swept) + N_SIGNALS  # columns of 8 bytes or fewer
+        self.columns = SIGNALS[:plan.n_signals]  # the signals the sweep records
+        n_sig = len(self.columns)
+        width = 2 + len(swept) + n_sig  # columns of 8 bytes or fewer
         self.group_jobs = max(1, min(len(plan.jobs), ROW_GROUP_BYTES // (self.n_out * 8 * width)))
-        self._buffers: list[np.ndarray] = []  # two [N_SIGNALS, group_jobs * n_out], edge units
+        self._buffers: list[np.ndarray] = []  # two [n_sig, group_jobs * n_out], edge units
         self._buf: np.ndarray | None = None  # the one being filled
         self._sent: np.ndarray | None = None  # the one last handed to the encoder
-        self._factors = np.array([[c.factor] for c in SIGNALS])  # SI -> edge units
+        self._factors = np.array([[c.factor] for c in self.columns])  # SI -> edge units
         self._jobs: list[int] = []  # job index of each job in the buffer
         self._pool: Any = None  # the encoder thread
         self._pending: Any = None  # the row group it is writing (a Future)
@@ -104,7 +106,7 @@ class SignalsWriter:
         self.schema = signals_schema(plan, swept, self._text)
         self._file = AtomicFile(path)
         self._writer = None
-        plain = [c.edge for c in SIGNALS if c.edge not in DICTIONARY_SIGNALS]
+        plain = [c.edge for c in self.columns if c.edge not in DICTIONARY_SIGNALS]
         try:
             self._writer = pq.ParquetWriter(
                 self._file.tmp, self.schema, compression=PARQUET_COMPRESSION,
@@ -154,7 +156,7 @@ class SignalsWriter:
         """The buffer the row group being written does not use (two in all: :meth:`_flush`
         waits for the previous row group before it hands on the next)."""
         if len(self._buffers) < 2:
-            self._buffers.append(np.empty((N_SIGNALS, self.group_jobs * self.n_out)))
+            self._buffers.append(np.empty((len(self.columns), self.group_jobs * self.n_out)))
             return self._buffers[-1]
         return self._buffers[0] if self._sent is self._buffers[1] else self._buffers[1]
 
@@ -162,7 +164,7 @@ class SignalsWriter:
         """SI ``src[m, n_out, N_SIGNALS]`` into the buffer's columns from sample ``a`` on, in
         edge units: one numpy call per tile of :data:`TILE_ROWS` samples (the tile stays in
         the CPU cache while it is transposed)."""
-        flat = src.reshape(-1, N_SIGNALS)
+        flat = src.reshape(-1, len(self.columns))
         for b in range(0, len(flat), TILE_ROWS):
             tile = flat[b:b + TILE_ROWS]
             np.multiply(tile.T, self._factors, out=self._buf[:, a + b:a + b + len(tile)])
@@ -214,7 +216,7 @@ class SignalsWriter:
             else:
                 columns.append(text([self._text[c][i] for i in jobs]))
         columns.append(pa.array(self._t[:n]))
-        columns += [pa.array(self._buf[k, :n]) for k in range(N_SIGNALS)]
+        columns += [pa.array(self._buf[k, :n]) for k in range(len(self.columns))]
         return pa.Table.from_arrays(columns, schema=self.schema)
 
     def commit(self) -> Path:
@@ -298,7 +300,8 @@ def signals_schema(plan: Plan, swept: Sequence[str], text: Any) -> Any:
     fields.append(pa.field(TIME_COLUMN, pa.float64(), nullable=False,
                            metadata=meta("s", "time")))
     fields += [pa.field(c.edge, pa.float64(), nullable=False,
-                        metadata=meta(edge_unit(c), c.description)) for c in SIGNALS]
+                        metadata=meta(edge_unit(c), c.description))
+               for c in SIGNALS[:plan.n_signals]]
     info = {
         "ema_version": __version__, "sweep": plan.cfg.name, "sweep_key": plan.key,
         "layout": "long: one row per job and sample; filter on 'job' for one run",

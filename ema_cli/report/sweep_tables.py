@@ -69,7 +69,7 @@ def axis_unit(info: AxisInfo) -> str:
 def write_job_csvs(result: SweepResult, folder: Path) -> None:
     """timeseries/<job>.csv for every finished job (t_s, then every signal in edge units):
     read row group by row group from signals.parquet when it was written."""
-    columns = [TIME_COLUMN, *(c.edge for c in SIGNALS)]
+    columns = [TIME_COLUMN, *(c.edge for c in SIGNALS[:result.plan.n_signals])]
     if result.signals_file is None:
         df = result.metrics
         for j in result.plan.jobs:

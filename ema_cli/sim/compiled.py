@@ -27,24 +27,24 @@ from ema_cli import progress
 COMPILE_S = {"rows": 6.0, "rows-parallel": 4.0, "lanes": 7.0, "lanes-parallel": 4.5,
              "identify": 4.0}
 QUIET_ENV = "EMA_COMPILE_QUIET"  # set: compile without announcing (ema compile's workers)
-FRIC_NAMES = {0: "no friction", 1: "LuGre (exponent 1)", 2: "LuGre"}
 
 
-def entry_name(parallel: bool, lanes: int, fric: int, extras: bool) -> str:
-    """The unit's name: ``lanes-parallel/fric1/extras0``."""
+def entry_name(parallel: bool, lanes: int, variant: int) -> str:
+    """The unit's name: ``lanes-parallel/v5`` (``variant``: ``model.actuator``'s code)."""
     base = ("lanes" if lanes > 1 else "rows") + ("-parallel" if parallel else "")
-    return f"{base}/fric{fric}/extras{int(extras)}"
+    return f"{base}/v{int(variant)}"
 
 
 def describe(name: str) -> str:
     """A reader's words for a unit name."""
+    from ema_cli.model.actuator import describe_variant
+
     if "/" not in name:
         return name
-    base, f, e = name.split("/")
+    base, v = name.split("/")
     width = "16 lanes" if base.startswith("lanes") else "one lane"
     par = ", parallel" if base.endswith("parallel") else ""
-    extras = ", extras" if e.endswith("1") else ""
-    return f"{width}{par}, {FRIC_NAMES[int(f[-1])]}{extras}"
+    return f"{width}{par}, {describe_variant(int(v[1:]))}"
 
 
 def _cache_dir() -> Path:
@@ -102,8 +102,8 @@ def kernel_units() -> list[str]:
     out = []
     for lanes in (1, LANES):
         for parallel in (False, True):
-            for fric, extras in VARIANTS[lanes]:
-                out.append(entry_name(parallel, lanes, fric, extras))
+            for variant in VARIANTS[lanes]:
+                out.append(entry_name(parallel, lanes, variant))
     return out
 
 

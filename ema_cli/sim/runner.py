@@ -43,21 +43,23 @@ from ema_cli.sim.kernel import (
     KERNELS,
     LANES,
     N_ROWS,
+    one_lane_only,
     variant_codes,
     variant_keys,
     variant_order,
 )
 from ema_cli.sim.signals import InputSignal, Reference, Sampler, sampler
-from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, SIGNALS
+from ema_cli.sim.tables import METRICS, N_METRICS, N_SIGNALS, PAPER_SIGNALS, SIGNALS
 
 __all__ = ["KERNEL_KEY", "BatchResult", "load_kernel", "simulate", "simulate_batch"]
 
 LANE_MIN_CASES = 4  # per thread: below this many cases, the one-lane path is faster [cases]
 EXTRAS_LANES = 1
-"""The lane width of the rows that need the kernel's extras variant (digital controller,
-quantisers, compensators) whatever width the batch asked: that variant's branches keep the
-compiler from vectorising it, and it ran at 5.3 M lane-steps/s per core in 16 lanes against
-7.6 M one lane at a time (``Ts > 0``, 2026-11-26). The results are the same bit for bit."""
+"""The lane width of the rows whose variant runs one lane at a time whatever width the batch
+asked (``kernel.one_lane_only``: a sampled controller, quantisers, compensators, static
+friction, another controller): their branches keep the compiler from vectorising, and the
+extras variant ran at 5.3 M lane-steps/s per core in 16 lanes against 7.6 M one lane at a time
+(``Ts > 0``, 2026-11-26). The results are the same bit for bit."""
 TIME_CHUNK = 2**14  # steps per kernel call; the references are sampled per call [steps]
 """Measured on 2 cores: sampling a reference costs the least per step at 2**14-2**15 steps (its
 arrays stay in cache): a step input 5-8 ns/step, 4-6x less than at 2**16 or in one piece, a sine
@@ -76,7 +78,10 @@ class BatchResult:
 
     P[n_cases, N_PARAMS]                 the SI parameter matrix that was run
     metrics[n_cases, N_METRICS]          SI metrics (columns: ``tables.METRICS``)
-    signals[n_cases, n_out, N_SIGNALS]   SI signals every ``dec`` steps, or None
+    signals[n_cases, n_out, n_sig]       SI signals every ``dec`` steps, or None: the first
+                                         ``n_sig`` of ``sim.tables.SIGNALS`` (the paper's EMA's
+                                         17, all of them for other descriptions:
+                                         :func:`signal_count`)
     t_out[n_out]                         the recorded times [s]
     kernel_s                             wall time inside the compiled kernel calls [s]
     load_s                               time spent loading (or compiling) the kernel [s]: 0
@@ -111,18 +116,24 @@ class BatchResult:
     def signal_names(self) -> tuple[str, ...]:
         """The kernel names of the recorded signals, in the order of the last axis of
         ``signals`` (``theta_ref``, ``theta_load``, ...; ``sim.tables.SIGNALS``)."""
-        return tuple(c.name for c in SIGNALS)
+        return tuple(c.name for c in self.columns)
+
+    @property
+    def columns(self) -> tuple:
+        """The :class:`sim.tables.Column` of each recorded signal (last axis of ``signals``)."""
+        n = self.signals.shape[2] if self.signals is not None else PAPER_SIGNALS
+        return SIGNALS[:n]
 
     def signal(self, name: str, case: int = 0, edge: bool = False) -> np.ndarray:
         """One recorded signal of one case by name (kernel name ``theta_load`` or edge column
         ``theta_load_deg``): SI, or in its edge unit with ``edge``."""
         if self.signals is None:
             raise EmaError("no signals were recorded (simulation.output_interval_s is null)")
-        for j, c in enumerate(SIGNALS):
+        for j, c in enumerate(self.columns):
             if name in (c.name, c.edge):
                 return self.signals[case, :, j] * (c.factor if edge else 1.0)
         raise EmaError(f"unknown signal {name!r}; expected one of "
-                       f"{', '.join(c.name for c in SIGNALS)}")
+                       f"{', '.join(c.name for c in self.columns)}")
 
     def signals_frame(self, case: int = 0) -> pd.DataFrame:
         """Recorded signals of one case in edge units, ``t_s`` first."""
@@ -131,7 +142,7 @@ class BatchResult:
         if self.signals is None:
             raise ValueError("signals were not recorded (output interval None)")
         data = {"t_s": self.t_out}
-        for j, c in enumerate(SIGNALS):
+        for j, c in enumerate(self.columns):
             data[c.edge] = self.signals[case, :, j] * c.factor
         return pd.DataFrame(data)
 
@@ -152,24 +163,24 @@ def check_sample_times(P: np.ndarray, dt: float) -> None:
 
 
 @functools.cache
-def kernel_signature(fric: int = 0, extras: bool = False) -> tuple:
+def kernel_signature(variant: int = 0) -> tuple:
     """The numba argument types :func:`simulate_batch` calls a kernel entry point with for
-    variant (``fric``, ``extras``) (compile-time constants: literal types)."""
+    ``variant`` (a compile-time constant: a literal type)."""
     from numba import types
 
     f2 = types.Array(types.float64, 2, "C")
     f3 = types.Array(types.float64, 3, "C")
     i1 = types.Array(types.int64, 1, "C")
     i8, f8 = types.int64, types.float64
-    # P, S, ref_pos, ref_vel, load_half, step_info, ref_index, out_row, dt, n_steps, k0, k1,
-    # dec, sig, met, fric, extras
-    return (f2, f3, f2, f2, f2, f2, i1, i1, f8, i8, i8, i8, i8, f3, f2,
-            types.literal(int(fric)), types.literal(bool(extras)))
+    # P, S, ref_pos, ref_vel, load_half, ext_half, step_info, ref_index, out_row, dt, n_steps,
+    # k0, k1, dec, sig, met, variant
+    return (f2, f3, f2, f2, f2, f2, f2, i1, i1, f8, i8, i8, i8, i8, f3, f2,
+            types.literal(int(variant)))
 
 
-def load_kernel(parallel: bool, lanes: int, fric: int = 0, extras: bool = False) -> float:
-    """Load the kernel entry point for (``parallel``, ``lanes``) in variant (``fric``,
-    ``extras``) into this process -> the seconds it took (0 if it was loaded already).
+def load_kernel(parallel: bool, lanes: int, variant: int = 0) -> float:
+    """Load the kernel entry point for (``parallel``, ``lanes``) in ``variant`` into this
+    process -> the seconds it took (0 if it was loaded already).
 
     The dispatcher is asked to compile :func:`kernel_signature`, the exact argument types
     :func:`simulate_batch` passes: numba takes the machine code from its on-disk cache (or
@@ -181,24 +192,24 @@ def load_kernel(parallel: bool, lanes: int, fric: int = 0, extras: bool = False)
     disp = KERNELS[(bool(parallel), lanes > 1)]
     if not hasattr(disp, "compile"):  # NUMBA_DISABLE_JIT: plain Python
         return 0.0
-    sig = kernel_signature(fric, extras)
+    sig = kernel_signature(variant)
     if sig in disp.overloads:
         return 0.0
     t0 = time.perf_counter()
-    with compiled.announce(compiled.entry_name(parallel, lanes, fric, extras)):
+    with compiled.announce(compiled.entry_name(parallel, lanes, variant)):
         disp.compile(sig)
     return time.perf_counter() - t0
 
 
-def entry_point(parallel: bool, lanes: int, fric: int, extras: bool) -> Callable[..., None]:
-    """The compiled entry point of variant (``fric``, ``extras``) as a plain function (the
-    machine code's own wrapper: calling the dispatcher would retype the literal variant
-    arguments on every call, milliseconds each); loaded first (:func:`load_kernel`)."""
+def entry_point(parallel: bool, lanes: int, variant: int) -> Callable[..., None]:
+    """The compiled entry point of ``variant`` as a plain function (the machine code's own
+    wrapper: calling the dispatcher would retype the literal variant argument on every call,
+    milliseconds each); loaded first (:func:`load_kernel`)."""
     disp = KERNELS[(bool(parallel), lanes > 1)]
     if not hasattr(disp, "compile"):  # NUMBA_DISABLE_JIT: plain Python
         return disp
-    load_kernel(parallel, lanes, fric, extras)
-    return disp.overloads[kernel_signature(fric, extras)].entry_point
+    load_kernel(parallel, lanes, variant)
+    return disp.overloads[kernel_signature(variant)].entry_point
 
 
 def _gib(n: float) -> str:
@@ -224,16 +235,29 @@ def record_budget() -> tuple[int | None, str]:
     return avail // 2, f"half the available memory; {BUDGET_ENV} sets another limit"
 
 
-def check_memory(n_cases: int, n_out: int, n_state: int) -> int:
+def signal_count(P: np.ndarray) -> int:
+    """How many signals a batch records (the first of ``sim.tables.SIGNALS``): the paper's
+    EMA's :data:`sim.tables.PAPER_SIGNALS` unless a row is another actuator (a rigid axis, an
+    amplifier, a load friction, another controller), which records them all (the drive's force
+    and the load's friction too)."""
+    from ema_cli.model.actuator import PAPER_MASK
+
+    P = np.asarray(P)
+    if P.shape[0] == 0:
+        return PAPER_SIGNALS
+    return N_SIGNALS if bool(np.any(variant_codes(P) > PAPER_MASK)) else PAPER_SIGNALS
+
+
+def check_memory(n_cases: int, n_out: int, n_state: int, n_sig: int = N_SIGNALS) -> int:
     """Refuse a batch whose results (and carried state) would not fit the :func:`record_budget`
     -> the bytes needed."""
-    record = n_cases * n_out * N_SIGNALS * 8
+    record = n_cases * n_out * n_sig * 8
     need = record + n_cases * (N_METRICS + N_PARAMS) * 8 + n_state * 8
     budget, source = record_budget()
     if budget is not None and need > budget:
         raise EmaError(
             f"recording the signals needs {_gib(need)} ({n_cases} run(s) x {n_out} samples x "
-            f"{N_SIGNALS} signals x 8 bytes, with the metrics), more than the {_gib(budget)} "
+            f"{n_sig} signals x 8 bytes, with the metrics), more than the {_gib(budget)} "
             f"allowed ({source}); use a larger simulation.output_interval_s or a shorter "
             "simulation.duration_s")
     return need
@@ -249,6 +273,7 @@ def simulate_batch(
     parallel: bool = False,
     lanes: int | None = None,
     progress: Callable[[float], None] | None = None,
+    n_signals: int | None = None,
 ) -> BatchResult:
     """Run every row of ``P`` (SI parameter matrix) for ``n_steps`` steps of ``dt`` seconds.
 
@@ -260,8 +285,9 @@ def simulate_batch(
     :func:`lanes_for`; rows that need the extras variant run one lane at a time either way
     (:data:`EXTRAS_LANES`). ``progress(fraction)`` is called after each time chunk with the fraction
     of the steps done. Results are bit-identical whatever ``parallel``, ``lanes`` and
-    :data:`TIME_CHUNK` are. Raises EmaError when the recorded signals would not fit in memory
-    (:func:`check_memory`).
+    :data:`TIME_CHUNK` are. ``n_signals`` how many signals to record (default
+    :func:`signal_count`; a sweep passes its own for every batch). Raises EmaError when the
+    recorded signals would not fit in memory (:func:`check_memory`).
     """
     import numba
 
@@ -277,6 +303,7 @@ def simulate_batch(
     sources = [sampler(r, dt, n_steps) for r in refs]
     info = np.ascontiguousarray(np.stack([s.step_info for s in sources]), dtype=np.float64)
     with_load = any(s.has_load for s in sources)
+    with_ext = any(s.has_ext for s in sources)
     if lanes is None:
         lanes = lanes_for(n_cases, numba.get_num_threads() if parallel else 1)
     if lanes not in (1, LANES):
@@ -284,24 +311,25 @@ def simulate_batch(
     chunk = max(int(TIME_CHUNK), 1)
     n_calls = -(-(n_steps + 1) // chunk)
     n_out = n_steps // dec + 1 if dec > 0 else 0
-    # the rows sorted by the kernel variant they need (friction and its exponent; digital
-    # controller, quantisers, compensators): each variant's rows are run by that
-    # variant's entry point (compiled the first time it is needed), in chunks of their own;
-    # each row writes its results straight into its own row of sig and met (out_row)
+    # the rows sorted by the kernel variant they need (model.actuator: friction and its
+    # exponent, the paper cascade's extras, the actuator's structure): each variant's rows are
+    # run by that variant's entry point (compiled the first time it is needed), in chunks of
+    # their own; each row writes its results straight into its own row of sig and met
     order = variant_order(P)
-    key = variant_keys(variant_codes(P[order]), lanes)  # sorted: each variant's rows contiguous
-    parts = []  # (variant args, lane width, first row, end row, state shape) in sorted order
-    for v in np.unique(key):
-        rows_v = np.flatnonzero(key == v)
+    codes = variant_codes(P[order])  # sorted: each variant's rows contiguous
+    check_inputs(codes, with_ext)
+    parts = []  # (variant, lane width, first row, end row, state shape) in sorted order
+    for code in np.unique(codes):
+        rows_v = np.flatnonzero(codes == code)
         a, b = int(rows_v[0]), int(rows_v[-1]) + 1
-        extras = bool(v // 3)
-        width = EXTRAS_LANES if extras else lanes  # the extras variant does not vectorise
-        fric = int(variant_keys(np.array([v]), width)[0] % 3)  # that width's friction variant
+        width = EXTRAS_LANES if one_lane_only(code) else lanes
+        variant = int(variant_keys(np.array([code]), width)[0])
         groups = (b - a) if width == 1 else -(-(b - a) // LANES)
         shape = (groups if n_calls > 1 else 0, N_ROWS, width)
-        parts.append(((fric, extras), width, a, b, shape))
-    check_memory(n_cases, n_out, sum(math.prod(p[4]) for p in parts))
-    sig = np.full((n_cases, n_out, N_SIGNALS), np.nan)
+        parts.append((variant, width, a, b, shape))
+    n_sig = signal_count(P) if n_signals is None else int(n_signals)
+    check_memory(n_cases, n_out, sum(math.prod(p[4]) for p in parts), n_sig)
+    sig = np.full((n_cases, n_out, n_sig), np.nan)
     met = np.empty((n_cases, N_METRICS))
     identity = bool(np.all(order == np.arange(n_cases)))
     Pk = P if identity else np.ascontiguousarray(P[order])
@@ -309,27 +337,27 @@ def simulate_batch(
     out_row = np.ascontiguousarray(order, dtype=np.int64)
     calls = []
     load_s = 0.0
-    for (fric, extras), width, a, b, shape in parts:
-        load_s += load_kernel(parallel, width, fric, extras)  # 0 when loaded already
-        kernel = entry_point(parallel, width, fric, extras)
+    for variant, width, a, b, shape in parts:
+        load_s += load_kernel(parallel, width, variant)  # 0 when loaded already
+        kernel = entry_point(parallel, width, variant)
         state = np.empty(shape)
         # lanes of the state that hold a real row (the rest repeat the first row of a chunk)
         real = (np.arange(shape[0])[:, None] * width + np.arange(width)[None, :]) < (b - a)
-        calls.append((kernel, fric, extras, np.ascontiguousarray(Pk[a:b]), state,
+        calls.append((kernel, variant, np.ascontiguousarray(Pk[a:b]), state,
                       np.ascontiguousarray(qk[a:b]), np.ascontiguousarray(out_row[a:b]), real))
     kernel_s = 0.0
     k0 = 0
     while k0 <= n_steps:
         k1 = min(k0 + chunk, n_steps + 1)
-        if n_calls > 1 and k0 > 0 and not any(np.any(c[4][:, ALIVE_ROW, :][c[7]] != 0.0)
+        if n_calls > 1 and k0 > 0 and not any(np.any(c[3][:, ALIVE_ROW, :][c[6]] != 0.0)
                                               for c in calls):
             k0 = n_steps + 1  # every row has diverged: only the metrics are left to finish
             k1 = k0
-        pos, vel, load = _inputs(sources, k0, k1, with_load)
+        pos, vel, load, ext = _inputs(sources, k0, k1, with_load, with_ext)
         t0 = time.perf_counter()
-        for kernel, fric, extras, Pv, state, qv, ov, _ in calls:
-            kernel(Pv, state, pos, vel, load, info, qv, ov, dt, n_steps, k0, k1, dec, sig, met,
-                   fric, extras)
+        for kernel, variant, Pv, state, qv, ov, _ in calls:
+            kernel(Pv, state, pos, vel, load, ext, info, qv, ov, dt, n_steps, k0, k1, dec, sig,
+                   met, variant)
         kernel_s += time.perf_counter() - t0
         if progress is not None:
             progress(min(k1, n_steps + 1) / (n_steps + 1))
@@ -349,20 +377,35 @@ def _rows(arrays: Sequence[np.ndarray]) -> np.ndarray:
     return np.require(a, dtype=np.float64, requirements=["C", "A", "W"])
 
 
-def _inputs(sources: Sequence, k0: int, k1: int,
-            with_load: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The kernel's input arrays for steps k0..k1-1: (ref_pos, ref_vel, load_half), one row per
-    reference (load_half has no columns when no reference has a load profile)."""
+def _inputs(sources: Sequence, k0: int, k1: int, with_load: bool,
+            with_ext: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's input arrays for steps k0..k1-1: (ref_pos, ref_vel, load_half, ext_half),
+    one row per reference (load_half and ext_half have no columns when no reference has one)."""
     no_columns = np.zeros((len(sources), 0))
     if k1 <= k0:  # nothing to sample
-        return no_columns, no_columns, no_columns
+        return no_columns, no_columns, no_columns, no_columns
     parts = [s.chunk(k0, k1) for s in sources]
     pos = _rows([p[0] for p in parts])
     vel = _rows([p[1] for p in parts])
-    if not with_load:
-        return pos, vel, no_columns
-    load = _rows([p[2] if p[2] is not None else np.zeros(pos.shape[1]) for p in parts])
-    return pos, vel, load
+    load = no_columns
+    if with_load:
+        load = _rows([p[2] if p[2] is not None else np.zeros(pos.shape[1]) for p in parts])
+    ext = no_columns
+    if with_ext:
+        exts = [s.ext_chunk(k0, k1) for s in sources]
+        ext = _rows([e if e is not None else np.zeros(pos.shape[1]) for e in exts])
+    return pos, vel, load, ext
+
+
+def check_inputs(codes: np.ndarray, with_ext: bool) -> None:
+    """A variant that reads the input signal (a disturbance added to the controller's output,
+    or the actuation of a plant without controller) needs one."""
+    from ema_cli.model.actuator import B_EXT
+
+    if not with_ext and np.any((np.asarray(codes) >> B_EXT) & 1):
+        raise EmaError("this actuator reads an input signal (controller none: the actuation; "
+                       "dist_out: a disturbance on the controller's output) and the run gives "
+                       "none (input.signal: a log channel or a CSV profile)")
 
 
 def simulate(

@@ -45,8 +45,14 @@ class InputSignal:
     load_sine  (amplitude [N*m], frequency [Hz]): a sine load torque ``A sin(2 pi f t)`` from
               t = 0, added to the profile; None: none
 
+    ext_table  the input signal ((t [s], ...), (value, ...)): a disturbance added to the
+              controller's output (``dist_out``) or, with no controller, the actuation itself
+              (``plant_input``: a command, a force or a current); held between its samples
+              (``ext_hold``, a logged DAC output) or interpolated linearly; its end values held
+    ext_name  where it came from (for reports)
+
     The signal carries every time-varying input of a run: the position reference and, when
-    given, the load-torque profile (``plant.load_torque_nb``).
+    given, the load-torque profile (``plant.load_torque_nb``) and the input signal.
     """
 
     kind: str = "step"
@@ -63,6 +69,10 @@ class InputSignal:
                                                                           repr=False)
     load_path: str | None = None
     load_sine: tuple[float, float] | None = None
+    ext_table: tuple[tuple[float, ...], tuple[float, ...]] | None = field(default=None,
+                                                                         repr=False)
+    ext_hold: bool = True
+    ext_name: str | None = None
 
     def describe(self) -> str:
         """A short human description in the paper's units."""
@@ -170,12 +180,14 @@ class Reference:
     vel[n_steps+1]         velocity at t = k*dt [rad/s]
     step_info[3]           (is_step, final value [rad], step time [s]) for the step metrics
     load_half[2*n_steps+1] external load-torque profile at t = j*dt/2 [N*m], or None (none)
+    ext_half[2*n_steps+1]  the input signal at t = j*dt/2, or None (none)
     """
 
     pos_half: np.ndarray
     vel: np.ndarray
     step_info: np.ndarray
     load_half: np.ndarray | None = None
+    ext_half: np.ndarray | None = None
 
 
 SCAN_STEPS = 2**16  # steps per block when a whole run's grid is scanned [steps]
@@ -213,6 +225,10 @@ class Sampler:
         if sig.load_table is not None:
             self._load = (np.asarray(sig.load_table[0]), np.asarray(sig.load_table[1]))
         self._load_sine = sig.load_sine
+        self._ext = None
+        if sig.ext_table is not None:
+            self._ext = (np.asarray(sig.ext_table[0], dtype=np.float64),
+                         np.asarray(sig.ext_table[1], dtype=np.float64))
         # np.gradient (the CSV velocity) takes its formula from the whole grid
         self._uniform = _uniform_grid(self.dt, self.n_steps) if sig.kind == "csv" else True
         is_step = sig.kind == "step" and sig.amplitude != 0.0
@@ -223,6 +239,19 @@ class Sampler:
     @property
     def has_load(self) -> bool:
         return self._load is not None or self._load_sine is not None
+
+    @property
+    def has_ext(self) -> bool:
+        return self._ext is not None
+
+    def ext_chunk(self, k0: int, k1: int) -> np.ndarray | None:
+        """The input signal at the half steps of steps ``k0 <= k < k1`` (as :meth:`chunk`), or
+        None without one."""
+        if self._ext is None:
+            return None
+        n, dt = self.n_steps, self.dt
+        th = np.arange(2 * k0, min(2 * k1, 2 * n) + 1) * (0.5 * dt)
+        return np.ascontiguousarray(sample_table(*self._ext, th, self.signal.ext_hold))
 
     def chunk(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The inputs of steps ``k0 <= k < k1`` (``0 <= k0 < k1 <= n_steps + 1``) ->
@@ -305,6 +334,11 @@ class _Presampled:
         self.n_steps = n_steps
         self.step_info = ref.step_info
         self.has_load = ref.load_half is not None
+        self.has_ext = ref.ext_half is not None
+
+    def ext_chunk(self, k0: int, k1: int) -> np.ndarray | None:
+        ext = self.ref.ext_half
+        return None if ext is None else ext[2 * k0:min(2 * k1, 2 * self.n_steps) + 1]
 
     def chunk(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         j1 = min(2 * k1, 2 * self.n_steps) + 1
@@ -330,4 +364,18 @@ def sample(sig: InputSignal, dt: float, n_steps: int) -> Reference:
     full steps for velocity). The kernel itself samples in time chunks (:func:`sampler`)."""
     s = Sampler(sig, dt, n_steps)
     pos, vel, load = s.chunk(0, n_steps + 1)
-    return Reference(pos, vel, s.step_info, load)
+    return Reference(pos, vel, s.step_info, load, s.ext_chunk(0, n_steps + 1))
+
+
+HOLD_TOL = 1e-3  # a table instant this close (fraction of its median spacing) to a time is on it
+
+
+def sample_table(t: np.ndarray, v: np.ndarray, times: np.ndarray, hold: bool) -> np.ndarray:
+    """A table ``(t, v)`` at ``times``: held from each of its instants to the next (zero-order
+    hold; an instant within :data:`HOLD_TOL` of its spacing before a time counts as reached:
+    logged time stamps jitter) or interpolated linearly; its end values held outside it."""
+    if not hold or t.shape[0] < 2:
+        return np.interp(times, t, v)
+    tol = HOLD_TOL * float(np.median(np.diff(t)))
+    i = np.searchsorted(t, times + tol, side="right") - 1
+    return v[np.clip(i, 0, t.shape[0] - 1)]

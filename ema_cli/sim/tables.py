@@ -20,32 +20,50 @@ class Column:
     edge: str
     factor: float
     description: str
+    value: str = ""
+    """A signal's value in the kernel: an expression of the state at the step's instant, the
+    inputs, what the step computed (``sim.layout.OUT``) and the parameters, by name
+    (``sim.layout`` generates the recording from it)."""
 
 
-def _col(name: str, si: str, edge: str, factor: float, desc: str) -> Column:
-    return Column(name, si, edge, factor, desc)
+def _col(name: str, si: str, edge: str, factor: float, desc: str, value: str = "") -> Column:
+    return Column(name, si, edge, factor, desc, value)
 
 
 SIGNALS: tuple[Column, ...] = (
-    _col("theta_ref", "rad", "theta_ref_deg", 1 / DEG, "position reference (load)"),
-    _col("theta_load", "rad", "theta_load_deg", 1 / DEG, "load angle"),
-    _col("theta_motor", "rad", "theta_motor_deg", 1 / DEG, "motor angle / gear ratio"),
-    _col("omega_ref", "rad/s", "omega_ref_deg_s", 1 / DEG, "velocity reference (load)"),
-    _col("omega_load", "rad/s", "omega_load_deg_s", 1 / DEG, "load speed"),
-    _col("omega_motor", "rad/s", "omega_motor_rpm", 1 / RPM, "motor speed"),
-    _col("current", "A", "current_a", 1.0, "armature current"),
-    _col("voltage_cmd", "V", "voltage_cmd_v", 1.0, "speed-regulator voltage demand (after SAT2)"),
-    _col("voltage_amp", "V", "voltage_amp_v", 1.0, "amplifier output (after DZ1)"),
-    _col("torque_shaft", "N*m", "torque_shaft_nm", 1.0, "transmission torque T (load side)"),
-    _col("torque_friction", "N*m", "torque_friction_nm", 1.0, "LuGre friction torque (motor)"),
-    _col("err_pos", "rad", "err_pos_deg", 1 / DEG, "position error theta_ref - theta_load"),
-    _col("err_vel", "rad/s", "err_vel_deg_s", 1 / DEG, "velocity error omega_ref - omega_load"),
-    _col("dtheta", "rad", "dtheta_rad", 1.0, "transmission deflection theta_m/m - theta_L"),
-    _col("domega", "rad/s", "domega_rad_s", 1.0, "transmission deflection rate w_m/m - w_L"),
-    _col("bristle_z", "rad", "bristle_z_rad", 1.0, "LuGre bristle deflection z"),
+    _col("theta_ref", "rad", "theta_ref_deg", 1 / DEG, "position reference (load)", "r0"),
+    _col("theta_load", "rad", "theta_load_deg", 1 / DEG, "load angle", "theta_L"),
+    _col("theta_motor", "rad", "theta_motor_deg", 1 / DEG, "motor angle / gear ratio",
+         "theta_m / m"),
+    _col("omega_ref", "rad/s", "omega_ref_deg_s", 1 / DEG, "velocity reference (load)", "rv"),
+    _col("omega_load", "rad/s", "omega_load_deg_s", 1 / DEG, "load speed", "w_L"),
+    _col("omega_motor", "rad/s", "omega_motor_rpm", 1 / RPM, "motor speed", "w_m"),
+    _col("current", "A", "current_a", 1.0, "armature current", "cur"),
+    _col("voltage_cmd", "V", "voltage_cmd_v", 1.0, "speed-regulator voltage demand (after SAT2)",
+         "u_out"),
+    _col("voltage_amp", "V", "voltage_amp_v", 1.0, "amplifier output (after DZ1)", "u_amp"),
+    _col("torque_shaft", "N*m", "torque_shaft_nm", 1.0, "transmission torque T (load side)",
+         "t_shaft"),
+    _col("torque_friction", "N*m", "torque_friction_nm", 1.0, "LuGre friction torque (motor)",
+         "t_fric"),
+    _col("err_pos", "rad", "err_pos_deg", 1 / DEG, "position error theta_ref - theta_load",
+         "r0 - theta_L"),
+    _col("err_vel", "rad/s", "err_vel_deg_s", 1 / DEG, "velocity error omega_ref - omega_load",
+         "rv - w_L"),
+    _col("dtheta", "rad", "dtheta_rad", 1.0, "transmission deflection theta_m/m - theta_L",
+         "theta_m / m - theta_L"),
+    _col("domega", "rad/s", "domega_rad_s", 1.0, "transmission deflection rate w_m/m - w_L",
+         "w_m / m - w_L"),
+    _col("bristle_z", "rad", "bristle_z_rad", 1.0, "LuGre bristle deflection z", "z"),
     _col("torque_load", "N*m", "torque_load_nm", 1.0,
-         "external torque on the load, + along +theta_L (config section load)"),
+         "external torque on the load, + along +theta_L (config section load)", "t_load"),
+    _col("drive_force", "N*m", "drive_force_nm", 1.0,
+         "the drive's force (torque) on the axis, load side", "f_drive"),
+    _col("friction_load", "N*m", "friction_load_nm", 1.0, "friction at the load, load side",
+         "f_fric_L"),
 )
+PAPER_SIGNALS = 17
+"""The first signals are the paper's EMA's (its tables and files show exactly these)."""
 
 METRICS: tuple[Column, ...] = (
     _col("iae_pos", "rad*s", "iae_pos_deg_s", 1 / DEG, "integral |position error| dt"),
@@ -84,3 +102,53 @@ MET: dict[str, int] = {c.name: i for i, c in enumerate(METRICS)}
 N_SIGNALS = len(SIGNALS)
 N_METRICS = len(METRICS)
 METRIC_BY_EDGE: dict[str, Column] = {c.edge: c for c in METRICS}
+
+
+@dataclass(frozen=True)
+class Accumulator:
+    """A running quantity of the metrics: name, initial value, its update at every step (an
+    expression of its own previous value and the step's quantities, ``sim.layout.STEP``, by
+    name) and what it holds."""
+
+    name: str
+    init: float
+    update: str
+    description: str
+
+
+_INF = float("inf")
+ACCUMULATORS: tuple[Accumulator, ...] = (
+    Accumulator("iae", 0.0, "iae + wgt * ae", "trapezoid sum of |e| dt"),
+    Accumulator("ise", 0.0, "ise + wgt * e * e", "trapezoid sum of e^2 dt"),
+    Accumulator("itae", 0.0, "itae + wgt * t * ae", "trapezoid sum of t |e| dt"),
+    Accumulator("iaev", 0.0, "iaev + wgt * aev", "trapezoid sum of |ev| dt"),
+    Accumulator("isev", 0.0, "isev + wgt * ev * ev", "trapezoid sum of ev^2 dt"),
+    Accumulator("itaev", 0.0, "itaev + wgt * t * aev", "trapezoid sum of t |ev| dt"),
+    Accumulator("emax", 0.0, "max(emax, ae)", "max |e|"),
+    Accumulator("evmax", 0.0, "max(evmax, aev)", "max |ev|"),
+    Accumulator("ss", 0.0, "ss + e if in_ss else ss", "sum of e over the steady-state window"),
+    Accumulator("emin_o", _INF, "min(emin_o, e) if in_osc else emin_o",
+                "min e over the oscillation window"),
+    Accumulator("emax_o", -_INF, "max(emax_o, e) if in_osc else emax_o",
+                "max e over the oscillation window"),
+    Accumulator("evmin_o", _INF, "min(evmin_o, ev) if in_osc else evmin_o",
+                "min ev over the oscillation window"),
+    Accumulator("evmax_o", -_INF, "max(evmax_o, ev) if in_osc else evmax_o",
+                "max ev over the oscillation window"),
+    Accumulator("smax", -_INF, "max(smax, s) if act else smax",
+                "largest share of the step reached"),
+    Accumulator("t10", float("nan"), "t if (act and t10 != t10 and s >= 0.1) else t10",
+                "first time at 10 % of the step"),
+    Accumulator("t50", float("nan"), "t if (act and t50 != t50 and s >= 0.5) else t50",
+                "first time at 50 % of the step"),
+    Accumulator("t90", float("nan"), "t if (act and t90 != t90 and s >= 0.9) else t90",
+                "first time at 90 % of the step"),
+    Accumulator("last_out", -1.0, "k if (act and abs(s - 1.0) > SETTLE_BAND) else last_out",
+                "last step outside the settling band"),
+    Accumulator("pki", 0.0, "max(pki, abs(cur))", "max |current|"),
+    Accumulator("pku", 0.0, "max(pku, abs(u_out))", "max |command|"),
+    Accumulator("pkwl", 0.0, "max(pkwl, abs(w_L))", "max |load speed|"),
+    Accumulator("pkt", 0.0, "max(pkt, abs(t_shaft))", "max |shaft torque|"),
+)
+SETTLE_BAND = 0.02  # settling band, fraction of the step
+

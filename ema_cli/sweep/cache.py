@@ -44,7 +44,7 @@ import numpy as np
 
 from ema_cli.errors import EmaError
 from ema_cli.files import RESULTS_ROOT, save_array
-from ema_cli.sim.tables import N_METRICS, N_SIGNALS
+from ema_cli.sim.tables import N_METRICS, N_SIGNALS, PAPER_SIGNALS
 
 DEFAULT_CACHE_DIR = RESULTS_ROOT / ".cache" / "sweep"
 DB_NAME = "jobs.sqlite"
@@ -102,8 +102,9 @@ class SignalsRule:
                         f"{SIGNALS_MAX_SHARE:.0%} of computing the job again"}
 
 
-def signals_rule(n_steps: int, n_out: int, workers: int = 1) -> SignalsRule:
-    """Cache a job's signals (``n_out`` samples of ``N_SIGNALS`` float64) only when storing them
+def signals_rule(n_steps: int, n_out: int, workers: int = 1,
+                 n_signals: int = PAPER_SIGNALS) -> SignalsRule:
+    """Cache a job's signals (``n_out`` samples of ``n_signals`` float64) only when storing them
     is estimated to cost at most :data:`SIGNALS_MAX_SHARE` of recomputing the job (``n_steps``
     kernel steps on ``workers`` threads).
 
@@ -115,7 +116,7 @@ def signals_rule(n_steps: int, n_out: int, workers: int = 1) -> SignalsRule:
     the measured cost, 0.23 s of 1.1 s) and 1e-4 s far past it (206 %). On 1 worker, whose
     re-run would take twice as long, 52 steps suffice.
     """
-    nbytes = n_out * N_SIGNALS * 8
+    nbytes = n_out * n_signals * 8
     store = nbytes / STORE_BYTES_PER_S
     kernel = n_steps * KERNEL_CPU_S_PER_STEP / max(workers, 1)
     share = store / kernel if kernel > 0 else math.inf
@@ -196,11 +197,12 @@ class JobCache:
         """Verified signals[n_out, N_SIGNALS] (SI) recorded every ``dec`` steps, or None."""
         return self.load_signals_many([key], dec).get(key)
 
-    def load_signals_many(self, keys: Iterable[str], dec: int,
-                          n_out: int | None = None) -> dict[str, np.ndarray]:
-        """Verified signals[n_out, N_SIGNALS] (SI) of those ``keys`` that have them.
+    def load_signals_many(self, keys: Iterable[str], dec: int, n_out: int | None = None,
+                          n_signals: int | None = None) -> dict[str, np.ndarray]:
+        """Verified signals[n_out, n_signals] (SI) of those ``keys`` that have them.
 
-        ``n_out`` given: a stored row of another length counts as missing (another duration).
+        ``n_out`` given: a stored row of another length counts as missing (another duration);
+        ``n_signals`` given: one of another number of signals too (another actuator's record).
         """
         by_file: dict[str, list[tuple[str, int, int, int]]] = {}
         for key, (file, row, n, crc) in self.signal_rows(keys, dec).items():
@@ -208,11 +210,11 @@ class JobCache:
                 by_file.setdefault(file, []).append((key, row, n, crc))
         found: dict[str, np.ndarray] = {}
         for file, rows in by_file.items():
-            found.update(self._read_rows(file, rows))
+            found.update(self._read_rows(file, rows, n_signals))
         return found
 
-    def _read_rows(self, file: str, rows: list[tuple[str, int, int, int]]
-                   ) -> dict[str, np.ndarray]:
+    def _read_rows(self, file: str, rows: list[tuple[str, int, int, int]],
+                   n_signals: int | None = None) -> dict[str, np.ndarray]:
         """Rows of one chunk file, each checked against its CRC-32 (bad ones are recorded)."""
         path = self.root / "signals" / file
         out: dict[str, np.ndarray] = {}
@@ -223,14 +225,16 @@ class JobCache:
                     raise ValueError("unknown .npy format version")
                 shape, fortran, dtype = reader(f)
                 if (fortran or dtype != np.dtype("<f8") or len(shape) != 3
-                        or shape[2] != N_SIGNALS):
+                        or not 0 < shape[2] <= N_SIGNALS):
                     raise ValueError(f"unexpected array {shape} {dtype}")
+                if n_signals is not None and shape[2] != n_signals:
+                    return out  # another number of signals: not this run's record
                 start = f.tell()
                 for key, row, n_out, crc in rows:
                     if row >= shape[0] or shape[1] != n_out:
                         self._bad(key, f"signals file {file} has shape {shape}")
                         continue
-                    buf = np.empty((n_out, N_SIGNALS))
+                    buf = np.empty((n_out, shape[2]))
                     f.seek(start + row * buf.nbytes)
                     if f.readinto(buf.data) != buf.nbytes:
                         self._bad(key, f"signals file {file} is truncated")

@@ -82,7 +82,7 @@ def resolve_backend(backend: str | None, workers: int) -> str:
 
 
 def chunk_sizes(n: int, n_steps: int, workers: int, backend: str, n_out: int,
-                chunk_size: int | None = None) -> list[int]:
+                chunk_size: int | None = None, n_signals: int = N_SIGNALS) -> list[int]:
     """Split ``n`` pending jobs into chunks (each one kernel call) -> list of chunk lengths.
 
     About ``CHUNKS_PER_WORKER`` chunks per worker, each holding at most
@@ -95,7 +95,7 @@ def chunk_sizes(n: int, n_steps: int, workers: int, backend: str, n_out: int,
         size = math.ceil(n / (CHUNKS_PER_WORKER * workers))
         size = min(size, max(1, MAX_CHUNK_CASE_STEPS * threads // max(n_steps, 1)))
         if n_out > 0:
-            size = min(size, max(1, MAX_CHUNK_SIGNAL_BYTES // (n_out * N_SIGNALS * 8)))
+            size = min(size, max(1, MAX_CHUNK_SIGNAL_BYTES // (n_out * n_signals * 8)))
         size = max(size, min(threads, n))
     else:
         size = chunk_size
@@ -122,14 +122,15 @@ def _reference(source: Source, dt: float, n_steps: int) -> Sampler:
 
 
 def run_chunk(P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
-              threads: int) -> ChunkOutput:
+              threads: int, n_signals: int | None = None) -> ChunkOutput:
     """Worker side: one kernel call on the parameter matrix ``P`` (SI) with ``threads`` threads.
 
     ``threads`` = 0 runs the serial kernel (no numba threading layer: safe in any thread, used
     on Dask workers); ``threads`` >= 1 runs the prange kernel on that many numba threads. Both
     give bit-identical results; the prange-compiled kernel is faster even on one thread
     (measured on 2 cores: 6.3 vs 10.1 ms per 1e5-step job), so local runs use it. Exceptions are
-    returned as text so one bad chunk does not stop the sweep.
+    returned as text so one bad chunk does not stop the sweep. ``n_signals``: the signals
+    every chunk of the sweep records (``sim.runner.signal_count`` of all its jobs).
     """
     import numba
 
@@ -138,7 +139,8 @@ def run_chunk(P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
         if threads > 0:
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
         ref = _reference(signal, dt, n_steps)
-        res = simulate_batch(P, [ref], None, dt, n_steps, dec, parallel=threads > 0)
+        res = simulate_batch(P, [ref], None, dt, n_steps, dec, parallel=threads > 0,
+                             n_signals=n_signals)
         return ChunkOutput(res.metrics, res.signals, res.kernel_s)
     except Exception as exc:  # reported per job in the manifest; the sweep goes on
         last = traceback.extract_tb(exc.__traceback__)[-1:]
@@ -177,7 +179,8 @@ OnChunk = Callable[[int, ChunkOutput], None]
 
 
 def execute(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int, dec: int,
-            backend: str, workers: int, on_chunk: OnChunk, scheduler: str | None = None) -> None:
+            backend: str, workers: int, on_chunk: OnChunk, scheduler: str | None = None,
+            n_signals: int | None = None) -> None:
     """Run every chunk (a parameter matrix) and call ``on_chunk(i, output)`` in the parent as
     each finishes (in completion order). KeyboardInterrupt stops the workers and propagates.
     """
@@ -186,29 +189,30 @@ def execute(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: in
     if backend in ("serial", "threads"):
         threads = 1 if backend == "serial" else workers
         for i, P in enumerate(chunks):
-            on_chunk(i, run_chunk(P, signal, dt, n_steps, dec, threads))
+            on_chunk(i, run_chunk(P, signal, dt, n_steps, dec, threads, n_signals))
         return
     if backend == "loky":
-        _execute_joblib(chunks, signal, dt, n_steps, dec, workers, on_chunk, "loky", threads=1)
+        _execute_joblib(chunks, signal, dt, n_steps, dec, workers, on_chunk, "loky", threads=1,
+                        n_signals=n_signals)
         return
     if backend == "dask":
-        _execute_dask(chunks, signal, dt, n_steps, dec, on_chunk, scheduler)
+        _execute_dask(chunks, signal, dt, n_steps, dec, on_chunk, scheduler, n_signals)
         return
     raise EmaError(f"unknown backend '{backend}'; expected one of {', '.join(BACKENDS)}")
 
 
 def _indexed(i: int, P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
-             threads: int) -> tuple[int, ChunkOutput]:
-    return i, run_chunk(P, signal, dt, n_steps, dec, threads)
+             threads: int, n_signals: int | None = None) -> tuple[int, ChunkOutput]:
+    return i, run_chunk(P, signal, dt, n_steps, dec, threads, n_signals)
 
 
 def _execute_joblib(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int,
                     dec: int, workers: int, on_chunk: OnChunk, backend: str | None,
-                    threads: int) -> None:
+                    threads: int, n_signals: int | None = None) -> None:
     """joblib over the chunks; ``backend`` None: the one set by ``joblib.parallel_config``."""
     from joblib import Parallel, delayed
 
-    tasks = (delayed(_indexed)(i, P, signal, dt, n_steps, dec, threads)
+    tasks = (delayed(_indexed)(i, P, signal, dt, n_steps, dec, threads, n_signals)
              for i, P in enumerate(chunks))
     kwargs = {} if backend is None else {"backend": backend}
     par = Parallel(n_jobs=workers, return_as="generator_unordered", **kwargs)
@@ -236,7 +240,8 @@ def check_dask(scheduler: str | None) -> None:
 
 
 def _execute_dask(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int,
-                  dec: int, on_chunk: OnChunk, scheduler: str | None) -> None:
+                  dec: int, on_chunk: OnChunk, scheduler: str | None,
+                  n_signals: int | None = None) -> None:
     check_dask(scheduler)
     from dask.distributed import Client
     from joblib import parallel_config
@@ -251,6 +256,6 @@ def _execute_dask(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_ste
         client.run(warm_kernel, signal, dt, 0)
         with client.as_current(), parallel_config(backend="dask"):
             _execute_joblib(chunks, signal, dt, n_steps, dec, n_workers, on_chunk, None,
-                            threads=0)
+                            threads=0, n_signals=n_signals)
     finally:
         client.close()

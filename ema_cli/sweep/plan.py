@@ -154,6 +154,14 @@ class Plan:
         return content_hash([cfg, [[j.id, j.key] for j in self.jobs]], KEY_LENGTH)
 
     @property
+    def n_signals(self) -> int:
+        """The signals every job of the sweep records (``sim.runner.signal_count``: the paper's
+        EMA's 17, or all of them when a job is another actuator)."""
+        from ema_cli.sim.runner import signal_count
+
+        return signal_count(self.P(self.jobs))
+
+    @property
     def n_unique(self) -> int:
         """Distinct cache keys (jobs that are identical runs are computed once)."""
         return len({j.key for j in self.jobs})

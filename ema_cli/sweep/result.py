@@ -90,7 +90,8 @@ class SweepResult:
         raise KeyError(f"no job {job!r} in this sweep")
 
     def signals(self, job: str | int) -> np.ndarray:
-        """SI signals[n_out, N_SIGNALS] of one job (columns: ``sim.tables.SIGNALS``).
+        """SI signals[n_out, n] of one job (columns: the first ``plan.n_signals`` of
+        ``sim.tables.SIGNALS``).
 
         From memory or the job cache (bit for bit what the kernel recorded), else from
         ``signals_file`` (edge units converted back: equal to within rounding; the way back for
@@ -105,7 +106,8 @@ class SweepResult:
             sig = self.cache.load_signals(j.key, self.plan.dec)
         if sig is None and self.signals_file is not None:
             ts = read_timeseries(self.signals_file, j.id)
-            sig = np.stack([ts[c.edge].to_numpy() / c.factor for c in SIGNALS], axis=1)
+            sig = np.stack([ts[c.edge].to_numpy() / c.factor
+                            for c in SIGNALS[:self.plan.n_signals]], axis=1)
         if sig is None:
             raise EmaError(f"job {j.id} ({j.label}) has no recorded time series "
                            f"(status {self.metrics['status'].iloc[j.index]})")
@@ -119,7 +121,7 @@ class SweepResult:
             return read_timeseries(self.signals_file, j.id)
         sig = self.signals(j.index)
         data = {TIME_COLUMN: np.arange(sig.shape[0]) * (self.plan.dec * self.plan.dt)}
-        for k, c in enumerate(SIGNALS):
+        for k, c in enumerate(SIGNALS[:sig.shape[1]]):
             data[c.edge] = sig[:, k] * c.factor
         return pd.DataFrame(data)
 
@@ -132,7 +134,9 @@ def read_timeseries(path: Path, job_id: str) -> pd.DataFrame:
     import pyarrow.parquet as pq
 
     try:
-        table = pq.read_table(path, columns=[TIME_COLUMN, *(c.edge for c in SIGNALS)],
+        names = set(pq.read_schema(path).names)  # the signals the sweep recorded
+        table = pq.read_table(path, columns=[TIME_COLUMN, *(c.edge for c in SIGNALS
+                                                            if c.edge in names)],
                               filters=[(JOB_COLUMN, "=", job_id)])
     except (OSError, ValueError) as exc:  # pyarrow's errors derive from these
         raise EmaError(f"cannot read the signals table '{path}': {exc}", 1) from None

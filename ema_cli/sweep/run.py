@@ -204,8 +204,8 @@ def _setup(plan: Plan, n_jobs: int | None, backend: str | None, scheduler: str |
     n_out = _n_out(plan)
     if n_out > 0 and plan.jobs:  # one chunk's recording must fit
         size = chunk_sizes(plan.n_unique, plan.n_steps, workers, setup.backend, n_out,
-                           setup.chunk_size)[0]
-        check_memory(size, n_out, 0)
+                           setup.chunk_size, plan.n_signals)[0]
+        check_memory(size, n_out, 0, plan.n_signals)
     if cache_dir is not None:
         check_cache_dir(Path(cache_dir))
     return setup
@@ -259,7 +259,8 @@ class _Run:
         if cache_dir is None:
             return
         if self.n_out > 0:
-            self.rule = signals_rule(self.plan.n_steps, self.n_out, self.setup.workers)
+            self.rule = signals_rule(self.plan.n_steps, self.n_out, self.setup.workers,
+                                     self.plan.n_signals)
         self.cache = JobCache(cache_dir)
         if self.cache_signals:
             self.pool = ThreadPoolExecutor(1, thread_name_prefix="ema-cache-store")
@@ -268,7 +269,7 @@ class _Run:
         """Finish the jobs the cache holds intact -> the keys still to compute, in job order."""
         t0 = time.perf_counter()
         pending = _lookup(self.cache, self.by_key, force, self.plan.dec, self.n_out,
-                          self.finish, self.hand_on)
+                          self.finish, self.hand_on, self.plan.n_signals)
         pending.sort(key=self.first.__getitem__)
         announce_size(len(pending), self.plan.n_steps, self.setup.workers)
         self.cached = len(self.by_key) - len(pending)
@@ -281,7 +282,7 @@ class _Run:
         """Compute the ``pending`` keys in chunks (one kernel call each) on the backend."""
         plan, setup, timings = self.plan, self.setup, self.timings
         sizes = chunk_sizes(len(pending), plan.n_steps, setup.workers, setup.backend,
-                            self.n_out, setup.chunk_size)
+                            self.n_out, setup.chunk_size, plan.n_signals)
         bounds = np.cumsum([0, *sizes])
         self.chunk_keys = [pending[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
         chunks = [plan.P([plan.jobs[self.first[k]] for k in keys]) for keys in self.chunk_keys]
@@ -294,7 +295,7 @@ class _Run:
             t1 = time.perf_counter()
             try:
                 execute(chunks, reference, plan.dt, plan.n_steps, plan.dec, setup.backend,
-                        setup.workers, self.on_chunk, setup.scheduler)
+                        setup.workers, self.on_chunk, setup.scheduler, plan.n_signals)
                 tw = time.perf_counter()
                 self.settle()
                 timings["writes"] += time.perf_counter() - tw
@@ -426,7 +427,8 @@ def check_cache_dir(path: Path) -> None:
 
 def _lookup(cache: JobCache | None, by_key: dict[str, list[int]], force: bool, dec: int,
             n_out: int, finish: Callable[[str, np.ndarray], None],
-            hand_on: Callable[[Sequence[str], np.ndarray], None]) -> list[str]:
+            hand_on: Callable[[Sequence[str], np.ndarray], None],
+            n_signals: int = N_SIGNALS) -> list[str]:
     """Finish the jobs the cache holds intact (metrics, and signals if ``dec`` > 0), handing
     their signals on in batches; returns the keys still to compute."""
     found = {} if force or cache is None else cache.lookup(by_key)
@@ -437,10 +439,11 @@ def _lookup(cache: JobCache | None, by_key: dict[str, list[int]], force: bool, d
         return pending
     assert cache is not None or not found
     keys = list(found)
-    step = max(1, CACHED_SIGNAL_BATCH_BYTES // (n_out * N_SIGNALS * 8))
+    step = max(1, CACHED_SIGNAL_BATCH_BYTES // (n_out * n_signals * 8))
     for a in range(0, len(keys), step):
         batch = keys[a:a + step]
-        sigs = cache.load_signals_many(batch, dec, n_out) if cache is not None else {}
+        sigs = (cache.load_signals_many(batch, dec, n_out, n_signals) if cache is not None
+                else {})
         ok = [key for key in batch if key in sigs]
         pending += [key for key in batch if key not in sigs]
         for key in ok:

@@ -57,9 +57,9 @@ def test_units_cover_every_entry_point_and_variant():
     assert len(names) == expected == 21
     for (parallel, lanes) in KERNELS:
         width = LANES if lanes else 1
-        for fric, extras in VARIANTS[width]:
-            assert compiled.entry_name(parallel, width, fric, extras) in names
-    assert compiled.describe("lanes-parallel/fric1/extras1") == (
+        for variant in VARIANTS[width]:
+            assert compiled.entry_name(parallel, width, variant) in names
+    assert compiled.describe("lanes-parallel/v5") == (
         "16 lanes, parallel, LuGre (exponent 1), extras")
 
 

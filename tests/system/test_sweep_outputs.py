@@ -21,11 +21,11 @@ from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
 from ema_cli.files import AtomicFile, atomic_write
 from ema_cli.report.sweep_report import default_cache_dir
-from ema_cli.sim.tables import METRICS, N_SIGNALS, SIGNALS
+from ema_cli.sim.tables import METRICS, PAPER_SIGNALS, SIGNALS
 from ema_cli.sweep.cache import DB_NAME, DEFAULT_CACHE_DIR
 from ema_cli.sweep.run import compute_sweep
 
-SIGNAL_COLS = [c.edge for c in SIGNALS]
+SIGNAL_COLS = [c.edge for c in SIGNALS[:PAPER_SIGNALS]]
 METRIC_COLS = [c.edge for c in METRICS]
 N_OUT = 51  # 0.05 s every 1e-3 s, both ends
 
@@ -67,8 +67,9 @@ def test_signals_parquet_round_trips_the_recorded_signals(tmp_path):
         np.testing.assert_allclose(rows["t_s"], np.arange(N_OUT) * 1e-3, rtol=1e-12, atol=0)
         assert (rows["deadzone2_deg"] == metrics["deadzone2_deg"].iloc[i]).all()
         si = res.signals(i)  # from the cache: what the kernel recorded, bit for bit
-        assert si.shape == (N_OUT, N_SIGNALS)
-        for k, c in enumerate(SIGNALS):  # every bit of float64 in edge units (NaN included)
+        assert si.shape == (N_OUT, PAPER_SIGNALS)
+        # every bit of float64 in edge units (NaN included)
+        for k, c in enumerate(SIGNALS[:PAPER_SIGNALS]):
             assert rows[c.edge].dtype == np.float64
             np.testing.assert_array_equal(rows[c.edge].to_numpy().view(np.uint64),
                                           (si[:, k] * c.factor).view(np.uint64))
@@ -88,7 +89,7 @@ def test_signals_parquet_round_trips_the_recorded_signals(tmp_path):
 
 
 def test_row_groups_hold_whole_jobs_and_a_filter_reads_one(tmp_path, monkeypatch):
-    row = (3 + N_SIGNALS) * 8 * N_OUT  # bytes per job: job, swept value, t_s, signals
+    row = (3 + PAPER_SIGNALS) * 8 * N_OUT  # bytes per job: job, swept value, t_s, signals
     monkeypatch.setattr(sweep_parquet, "ROW_GROUP_BYTES", 2 * row)  # two jobs per group
     res = sweep(tmp_path)
     meta = pq.ParquetFile(res.signals_file).metadata
@@ -175,7 +176,7 @@ def test_damaged_cache_entries_are_recomputed_and_reported(tmp_path):
     first = sweep(tmp_path, "first")
     cache = tmp_path / "cache"
     keys = [j.key for j in first.jobs]
-    row_bytes = N_OUT * N_SIGNALS * 8
+    row_bytes = N_OUT * PAPER_SIGNALS * 8
     with sqlite3.connect(cache / DB_NAME) as db:  # an edited metrics row (job 0)
         blob = db.execute("SELECT metrics FROM jobs WHERE key = ?", (keys[0],)).fetchone()[0]
         edited = np.frombuffer(blob).copy()
@@ -220,7 +221,7 @@ def test_no_cache_and_no_files_without_outputs(tmp_path, monkeypatch):
     ref = compute_sweep(cfg, n_jobs=1, progress=False)
     assert ref.cache is None and sorted(p.name for p in tmp_path.iterdir()) == ["study.yaml"]
     # the signals are kept in memory instead
-    assert res.signals(3).shape == (N_OUT, N_SIGNALS)
+    assert res.signals(3).shape == (N_OUT, PAPER_SIGNALS)
     np.testing.assert_array_equal(res.signals(3), ref.signals(3))
     ts = res.timeseries("j0001")
     np.testing.assert_array_equal(ts["theta_load_deg"].to_numpy(),

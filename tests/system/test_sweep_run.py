@@ -19,7 +19,7 @@ from ema_cli.cli.main import app
 from ema_cli.config.loader import load_config
 from ema_cli.config.study import StudyConfig
 from ema_cli.sim.runner import simulate
-from ema_cli.sim.tables import METRICS, N_SIGNALS
+from ema_cli.sim.tables import METRICS, PAPER_SIGNALS
 from ema_cli.sweep.cache import JobCache
 from ema_cli.sweep.execute import WARM_STEPS
 
@@ -224,7 +224,7 @@ def test_a_rerun_recomputes_exactly_the_jobs_whose_signals_were_not_cached(tmp_p
         j.key for j in second.jobs)  # every job's metrics (and their checksums) are cached
     man = json.loads((tmp_path / "full" / "manifest.json").read_text())
     assert man["signals_cache"]["cached"] is False and man["signals_cache"]["bytes_per_job"] == (
-        101 * N_SIGNALS * 8)
+        101 * PAPER_SIGNALS * 8)
     # 3. again: exactly the two jobs without cached signals run, nothing else
     kernel = CountingKernel()
     monkeypatch.setattr(execute, "simulate_batch", kernel)

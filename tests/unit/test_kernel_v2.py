@@ -435,15 +435,17 @@ def test_load_profile_is_interpolated_linearly_and_held_at_the_ends():
 
 
 def test_variant_arguments_of_each_lane_width():
-    # one lane has one friction variant (pow's own branch serves exponent 1); lanes have three
-    assert kernel.variant_args(0, 1) == (0, False)
-    assert kernel.variant_args(1, 1) == (2, False)
-    assert kernel.variant_args(4, 1) == (2, True)
-    assert kernel.variant_args(1, kernel.LANES) == (1, False)
-    assert kernel.variant_args(5, kernel.LANES) == (2, True)
-    assert set(kernel.VARIANTS[1]) == {kernel.variant_args(c, 1) for c in range(6)}
+    # one lane has one LuGre variant (pow's own branch serves exponent 1); lanes have two. The
+    # paper's codes: fric + 4*extras (model.actuator)
+    assert kernel.variant_args(0, 1) == 0
+    assert kernel.variant_args(1, 1) == 2
+    assert kernel.variant_args(5, 1) == 6
+    assert kernel.variant_args(1, kernel.LANES) == 1
+    assert kernel.variant_args(6, kernel.LANES) == 6
+    paper = (0, 1, 2, 4, 5, 6)
+    assert set(kernel.VARIANTS[1]) == {kernel.variant_args(c, 1) for c in paper}
     assert set(kernel.VARIANTS[kernel.LANES]) == {kernel.variant_args(c, kernel.LANES)
-                                                  for c in range(6)}
+                                                  for c in paper}
 
 
 def test_a_batch_of_mixed_variants_equals_its_single_runs():
@@ -469,14 +471,13 @@ def test_extras_rows_run_one_lane_at_a_time_in_a_lane_batch(monkeypatch):
     seen = []
     real = runner.entry_point
 
-    def spy(parallel, lanes, fric, extras):
-        seen.append((lanes, fric, extras))
-        return real(parallel, lanes, fric, extras)
+    def spy(parallel, lanes, variant):
+        seen.append((lanes, variant))
+        return real(parallel, lanes, variant)
 
     monkeypatch.setattr(runner, "entry_point", spy)
     rows = [{}, {"Ts": 1e-4}, {"dzi_v": 0.5, "friction": 1}, {"friction": 1}] * 6
     P = np.array([to_row(resolve(o)) for o in rows])
     simulate_batch(P, [InputSignal("step", 0.1 * DEG)], None, 1e-5, 200, 10,
                    lanes=kernel.LANES)
-    assert sorted(seen) == [(1, 0, True), (1, 2, True), (kernel.LANES, 0, False),
-                            (kernel.LANES, 1, False)]
+    assert sorted(seen) == [(1, 4), (1, 6), (kernel.LANES, 0), (kernel.LANES, 1)]

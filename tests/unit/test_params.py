@@ -22,9 +22,12 @@ from ema_cli.model.params import (
 )
 
 MODEL_MD = Path(__file__).resolve().parents[2] / "docs" / "model.md"
-DERIVED = {"c", "Fs", "sigma0", "sigma1"}
-NEGATIVE_OK = {"T_load", "k_h", "x0_theta_m", "x0_w_m", "x0_i", "x0_theta_L", "x0_w_L", "x0_z",
-               "x0_xI"}  # docs/model.md §4: only these may be negative (loads, initial states)
+DERIVED = {"c", "Fs", "sigma0", "sigma1", "Fc_neg", "Fs_neg", "sigma2_neg", "Fs_L", "Fc_L_neg",
+           "Fs_L_neg", "Fv_L_neg", "sigma0_L", "sigma1_L"}
+NEGATIVE_OK = {"T_load", "k_h", "offset", *(f"dc_fir{k}" for k in range(8)),
+               *(f"x0_{s}" for s in ("theta_m", "w_m", "i", "theta_L", "w_L", "z", "xI", "f_amp",
+                                     "z_L"))}
+# docs/model.md §4: only these may be negative (loads, the offset, FIR taps, initial states)
 
 
 def doc_table(heading: str) -> list[list[str]]:
@@ -72,7 +75,8 @@ def test_defaults_finite_or_derived():
         if p.name in DERIVED:
             assert p.default is None, p.name
         else:
-            assert isinstance(p.default, float) and math.isfinite(p.default), p.name
+            assert isinstance(p.default, float), p.name
+            assert math.isfinite(p.default) or p.limit, p.name  # a limit may default to none
         assert p.unit and p.description, p.name
         assert p.nonnegative == (p.name not in NEGATIVE_OK), p.name
     assert set(FLAGS) <= set(INDEX)
@@ -82,7 +86,8 @@ def test_to_row_is_table_order():
     values = resolve()
     row = to_row(values)
     assert len(row) == N_PARAMS
-    assert all(isinstance(x, float) and math.isfinite(x) for x in row)
+    assert all(isinstance(x, float) and (math.isfinite(x) or PARAMS[k].limit)
+               for k, x in enumerate(row))
     for p in PARAMS:
         assert row[INDEX[p.name]] == values[p.name]
     assert set(values) == set(INDEX)
@@ -102,6 +107,9 @@ def test_doc_defaults_match_resolved_defaults():
     values = resolve()
     for r in DOC_ROWS:
         name = r[0].strip("`")
+        if r[1].startswith("inf"):  # "inf (none)": a limit that is off by default
+            assert values[name] == math.inf, name
+            continue
         doc = first_number(r[1])  # "0.77328 (derived)", "13.963 (= 800 °/s)", "`contact` (0)"
         # the doc prints 5 significant digits at most
         assert values[name] == pytest.approx(doc, rel=5e-5, abs=1e-12), (name, r[1])
@@ -175,7 +183,7 @@ def test_check_value_accepts(name, raw, expected):
     ("kL", "inf", r"'kL' cannot be 'inf'"),
     ("kL", math.inf, r"'kL' must be finite"),
     ("d1", "off", r"'d1' cannot be 'off'"),
-    ("damping", 1.0, r"'damping' must be one of \['contact', 'paper'\]"),
+    ("damping", 2.0, r"'damping' must be one of contact \(0\), paper \(1\), got 2.0"),
     ("damping", "viscous", r"'damping' must be one of"),
 ])
 def test_check_value_refuses(name, raw, match):
@@ -194,7 +202,15 @@ def test_unknown_parameter_lists_the_names():
 @pytest.mark.parametrize(("over", "match"), [
     ({"m": 0}, r"'m' must be > 0"), ({"L": 0.0}, r"'L' must be > 0"),
     ({"Jm": 0}, r"'Jm' must be > 0"), ({"JL": 0}, r"'JL' must be > 0"),
-    ({"friction": 2}, r"'friction' must be 0/off or 1/on, got 2"),
+    ({"friction": 3}, r"'friction' must be one of off \(0\), lugre \(1\), static \(2\), got 3"),
+    ({"friction": 2, "Fc": 0.02, "Fs": 0.01},
+     r"'Fs' \(breakaway friction, 0.01\) must be >= 'Fc'"),
+    ({"rigid": 1, "alpha": 0.001}, r"'alpha' \(backlash, 0.001 rad\) needs a compliant"),
+    ({"ctrl": "discrete"}, r"the discrete cascade \(ctrl = discrete\) needs a sample time"),
+    ({"ctrl": "discrete", "Ts": 1e-3, "dc_ndiff": 0},
+     r"'dc_ndiff' \(samples of the velocity's position difference\) must be a whole number "
+     r"in 1..16, got 0"),
+    ({"ctrl": "discrete", "Ts": 1e-3, "dc_delay": 1.5}, r"'dc_delay' .* whole number in 0..8"),
     ({"locked": 0.5}, r"'locked' must be 0/off or 1/on"),
     ({"friction": 1, "Fc": 0}, r"LuGre friction needs Fc > 0 and vs > 0"),
     ({"friction": 1, "vs": 0}, r"LuGre friction needs Fc > 0 and vs > 0"),

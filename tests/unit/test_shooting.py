@@ -10,9 +10,10 @@ import pytest
 from ema_cli.identify.closed_loop import CHANNELS, FLOOR_NOTE, ClosedLoopLog
 from ema_cli.identify.closed_loop_fit import build_problem, run_closed_loop
 from ema_cli.identify.log_settings import ClosedLoopSettings
+from ema_cli.identify.shooting import SEGMENT_STATES
 from ema_cli.identify.synthetic_logs import closed_loop_log
 from ema_cli.identify.uncertainty import covariance, covariance_clustered
-from ema_cli.model.params import INDEX, INITIAL_STATE, resolve, to_row
+from ema_cli.model.params import INDEX, resolve, to_row
 from ema_cli.units import DEG
 
 DT = 1e-5
@@ -44,8 +45,8 @@ def test_a_run_from_a_recorded_state_continues_the_run_it_came_from():
     x0 = [s[k, SIG["theta_motor"]] * prm["m"], s[k, SIG["omega_motor"]], s[k, SIG["current"]],
           s[k, SIG["theta_load"]], s[k, SIG["omega_load"]], s[k, SIG["bristle_z"]], x_i]
     row = np.array(to_row(prm))
-    for name, v in zip(INITIAL_STATE, x0, strict=True):
-        row[INDEX[name]] = v
+    for name, v in zip(SEGMENT_STATES, x0, strict=True):
+        row[INDEX[f"x0_{name}"]] = v
     b = simulate_batch(row[None], [_csv(t[k:] - t[k], ref[k:])], None, DT, n1 // 2, 10)
     for name in ("theta_load", "omega_motor", "current", "voltage_cmd", "bristle_z"):
         j = SIG[name]

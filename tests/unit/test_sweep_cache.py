@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ema_cli.errors import EmaError
-from ema_cli.sim.tables import N_METRICS, N_SIGNALS
+from ema_cli.sim.tables import N_METRICS, PAPER_SIGNALS
 from ema_cli.sweep.cache import DB_NAME, SIGNALS_MAX_SHARE, JobCache, signals_rule
 from ema_cli.sweep.execute import chunk_sizes, resolve_backend, resolve_workers
 
@@ -17,7 +17,7 @@ def stored(tmp_path, n=3, n_out=11, dec=10):
     cache = JobCache(tmp_path)
     rng = np.random.default_rng(1)
     m = rng.standard_normal((n, N_METRICS))
-    s = rng.standard_normal((n, n_out, N_SIGNALS))
+    s = rng.standard_normal((n, n_out, PAPER_SIGNALS))
     keys = [f"k{r}" for r in range(n)]
     cache.store(keys, m, s, dec=dec)
     return cache, keys, m, s
@@ -59,7 +59,7 @@ def test_a_flipped_byte_in_a_signals_row_is_detected_and_not_served(tmp_path):
     cache, keys, m, s = stored(tmp_path)
     path, row, n_out = signals_file(cache, "k1")
     data = bytearray(path.read_bytes())
-    pos = len(data) - (3 - row) * n_out * N_SIGNALS * 8 + 100  # inside row 1's bytes
+    pos = len(data) - (3 - row) * n_out * PAPER_SIGNALS * 8 + 100  # inside row 1's bytes
     data[pos] ^= 0x01
     path.write_bytes(bytes(data))
     fresh = JobCache(tmp_path)
@@ -91,7 +91,7 @@ def test_an_edited_metrics_row_is_detected_and_not_served(tmp_path):
 def test_a_truncated_or_missing_signals_file_is_detected(tmp_path):
     cache, keys, _, s = stored(tmp_path)
     path, _, n_out = signals_file(cache, "k0")
-    row_bytes = n_out * N_SIGNALS * 8
+    row_bytes = n_out * PAPER_SIGNALS * 8
     path.write_bytes(path.read_bytes()[:-row_bytes // 2])  # half of the last row (k2) cut off
     fresh = JobCache(tmp_path)
     got = fresh.load_signals_many(keys, 10)
@@ -136,7 +136,7 @@ def test_signals_are_cached_only_when_storing_them_costs_little_next_to_computin
     assert not bench.cache and bench.share < 1.1 * SIGNALS_MAX_SHARE
     assert not dense.cache and dense.share > 1
     assert signals_rule(100_000, 1001, 1).cache
-    assert dense.bytes_per_job == 10_001 * N_SIGNALS * 8
+    assert dense.bytes_per_job == 10_001 * PAPER_SIGNALS * 8
     assert dense.share == pytest.approx(10 * bench.share, rel=1e-3)  # bytes per step decide
     assert not signals_rule(100_000, 0, 1).cache  # nothing recorded
     record = sparse.describe()

@@ -22,7 +22,7 @@ from ema_cli.model.params import N_PARAMS, resolve, to_row
 from ema_cli.sim import kernel, runner, signals
 from ema_cli.sim.runner import load_kernel, plan_steps, simulate_batch
 from ema_cli.sim.signals import InputSignal, Reference, sample, sampler
-from ema_cli.sim.tables import MET, N_METRICS, N_SIGNALS, SIG
+from ema_cli.sim.tables import MET, N_METRICS, PAPER_SIGNALS, SIG
 from ema_cli.units import DEG
 
 DT = 1e-5  # [s]
@@ -261,7 +261,7 @@ def test_recording_over_the_budget_is_refused_before_allocating(monkeypatch):
     monkeypatch.setenv(runner.BUDGET_ENV, "1e9")
     P = np.array([to_row(resolve())])
     n_steps, dec = plan_steps(10_000.0, 1e-5, 1e-4)  # 1e8 + 1 samples of 17 signals
-    need = ((10**8 + 1) * N_SIGNALS + N_METRICS + N_PARAMS) * 8
+    need = ((10**8 + 1) * PAPER_SIGNALS + N_METRICS + N_PARAMS) * 8
     t0 = time.perf_counter()
     with pytest.raises(EmaError) as err:
         simulate_batch(P, [SIGNALS[0]], None, 1e-5, n_steps, dec)
@@ -309,9 +309,9 @@ def test_kernel_time_excludes_loading_and_calls_compile_nothing_new(monkeypatch)
     # variant, literal variant arguments): no call compiled anything of its own inside the
     # timed region
     disp = kernel.KERNELS[(False, True)]
-    prepared = {runner.kernel_signature(f, e) for f, e in kernel.VARIANTS[kernel.LANES]}
+    prepared = {runner.kernel_signature(v) for v in kernel.VARIANTS[kernel.LANES]}
     assert set(disp.overloads) <= prepared
-    assert runner.kernel_signature(*kernel.variant_args(
+    assert runner.kernel_signature(kernel.variant_args(
         int(kernel.variant_codes(P)[0]), kernel.LANES)) in disp.overloads
 
 

@@ -1,0 +1,107 @@
+"""Kernel variants: which compiled version of the kernel each configuration needs.
+
+A configuration's *variant* (``model.actuator``: friction at the motor and at the load, the
+paper cascade's extras, a rigid axis, an amplifier and its bandwidth, the controller, an input
+signal) is read from its parameter row; the runner groups a batch's rows by variant and calls
+each variant's compiled entry point for its rows (a variant is compiled the first time a batch
+needs it). Variants with a sampled controller, a quantiser, a compensator, static friction or
+another controller run one lane at a time: their branches do not vectorise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ema_cli._numba import njit
+from ema_cli.model.actuator import (
+    B_AMP,
+    B_AMP_BW,
+    B_CTRL,
+    B_EXT,
+    B_EXTRAS,
+    B_FRIC_L,
+    B_RIGID,
+    CTRL_NONE,
+    FRIC_LUGRE1,
+    FRIC_STATIC,
+    LFRIC_STATIC,
+)
+from ema_cli.sim.layout import R
+
+LANES = 16  # configurations advanced together in a chunk (see make bench) [lanes]
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _lane_variant(W, j):
+    """The variant code lane ``j`` of ``W`` (rows: model.params order first) needs alone
+    (``model.actuator``): the one definition :func:`variant_codes` and :func:`variant_order`
+    use. Extras: the digital controller, a quantiser or a compensator (any controller's
+    sampling); the locked motor runs in every variant."""
+    fric = W[R.friction, j]
+    fric_m = (0 if fric == 0.0 else (3 if fric == 2.0 else (1 if W[R.delta, j] == 1.0
+                                                             else 2)))
+    extras = (W[R.Ts, j] > 0.0 or W[R.q_pos, j] > 0.0 or W[R.q_speed, j] > 0.0
+              or W[R.dzi_v, j] > 0.0 or W[R.ff_fc, j] > 0.0
+              or W[R.ff_sigma2, j] > 0.0 or W[R.notch_hz, j] > 0.0
+              or W[R.ff_sigma0, j] > 0.0)
+    amp = W[R.drive, j] == 1.0
+    ctrl = int(W[R.ctrl, j])
+    fric_l = int(W[R.friction_L, j])
+    ext = ctrl == CTRL_NONE or W[R.dist_out, j] != 0.0
+    return (fric_m | (int(extras) << B_EXTRAS) | (int(W[R.rigid, j] != 0.0) << B_RIGID)
+            | (int(amp) << B_AMP) | (int(amp and W[R.amp_tau, j] > 0.0) << B_AMP_BW)
+            | (fric_l << B_FRIC_L) | (ctrl << B_CTRL) | (int(ext) << B_EXT))
+
+
+@njit(cache=True, error_model="numpy")
+def _variant_codes_nb(PT):
+    """Per configuration (column of ``PT[N_PARAMS, n_cases]``), the variant it needs alone."""
+    out = np.empty(PT.shape[1], dtype=np.int64)
+    for j in range(PT.shape[1]):
+        out[j] = _lane_variant(PT, j)
+    return out
+
+
+def variant_codes(P: np.ndarray) -> np.ndarray:
+    """Per row of ``P[n_cases, N_PARAMS]`` the kernel variant it needs alone (a code of
+    ``model.actuator``; the paper's EMA: ``fric + 4*extras``, fric 0 no friction, 1 LuGre with
+    the Stribeck exponent 1, 2 any other)."""
+    return _variant_codes_nb(np.ascontiguousarray(P.T))
+
+
+def variant_order(P: np.ndarray) -> np.ndarray:
+    """The rows of ``P[n_cases, N_PARAMS]`` sorted (stably) by the kernel variant they need
+    (cheapest first), so that the rows of one variant are contiguous: the permutation
+    ``order`` (run ``P[order]``)."""
+    return np.argsort(variant_codes(P), kind="stable")
+
+
+def one_lane_only(code: int) -> bool:
+    """Whether a variant runs one lane at a time whatever the batch's width: a sampled
+    controller, a quantiser or a compensator (the extras), static friction (stick-slip), a
+    controller other than the paper's: their branches keep the compiler from vectorising."""
+    code = int(code)
+    fric_l = (code >> B_FRIC_L) & 3
+    return bool((code >> B_EXTRAS) & 1 or code & 3 == FRIC_STATIC or fric_l == LFRIC_STATIC
+                or (code >> B_CTRL) & 3)
+
+
+def variant_keys(codes: np.ndarray, lanes: int) -> np.ndarray:
+    """The entry-point variant each code of :func:`variant_codes` runs as in lanes (16) or one
+    lane (1): one lane has one LuGre variant (any exponent: ``pow_nb``'s own branch skips the
+    log and exp for an exponent of 1) for both LuGre codes, so the keys keep the codes' order
+    (rows sorted by code stay grouped by key)."""
+    codes = np.asarray(codes, dtype=np.int64)
+    if lanes == 1:
+        return np.where(codes & 3 == FRIC_LUGRE1, codes + 1, codes)
+    return codes.copy()
+
+
+def variant_args(code: int, lanes: int) -> int:
+    """The variant argument of an entry point for ``code`` in lanes (16) or one lane (1)."""
+    return int(variant_keys(np.array([code]), lanes)[0])
+
+
+VARIANTS = {1: (0, 2, 4, 6), LANES: (0, 1, 2, 4, 5, 6)}
+"""The paper's EMA's variants each lane width compiles ahead (``ema compile``); the variants of
+other actuator descriptions compile the first time a run needs them."""
