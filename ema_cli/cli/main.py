@@ -84,9 +84,28 @@ LLVM and matplotlib takes ~0.45 s and does nothing these commands need; commands
 worker pools (sweep, identify, reproduce) exit normally so that the pools are shut down."""
 
 
-def _terminate(signum: int, frame: object) -> None:
-    """SIGTERM: stop like Ctrl-C (finished work kept, temporary files removed)."""
-    raise KeyboardInterrupt
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGINT (Ctrl-C) and SIGTERM: stop where the program runs (finished work kept, temporary
+    files removed); ``handle_errors`` exits 130 or 143."""
+    import signal
+
+    from ema_cli.errors import SIGNALLED, Terminated
+
+    SIGNALLED.append(signum)
+    raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+
+
+def _exit_now(signum: int, frame: object) -> None:
+    """A signal after the command has finished (its folder is complete): exit at once with
+    128 + the signal's number, skipping the interpreter's teardown."""
+    import contextlib
+    import os
+    import sys
+
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+    os._exit(128 + signum)
 
 
 def run(args: list[str] | None = None) -> int:
@@ -113,8 +132,12 @@ def run(args: list[str] | None = None) -> int:
     except typer.Exit as exc:
         return exc.exit_code
     except typer.Abort:
+        import signal
+
+        from ema_cli.errors import SIGNALLED
+
         typer.echo("interrupted", err=True)
-        return 130
+        return 143 if signal.SIGTERM in SIGNALLED else 130
     return result if isinstance(result, int) else 0
 
 
@@ -125,13 +148,16 @@ def main() -> None:
     import sys
     import warnings
 
-    signal.signal(signal.SIGTERM, _terminate)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _interrupt)
     # numpy overflow warnings and matplotlib layout advice are not for the user of a command:
     # what matters is reported (divergence, limits) in the command's own words
     warnings.simplefilter("ignore", RuntimeWarning)
     warnings.filterwarnings("ignore", category=UserWarning, module="matplotlib")
     command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
     code = run(sys.argv[1:])
+    for sig in (signal.SIGINT, signal.SIGTERM):  # the work is done: a late signal ends it now
+        signal.signal(sig, _exit_now)
     if command in FAST_EXIT:
         sys.stdout.flush()
         sys.stderr.flush()
