@@ -278,17 +278,23 @@ def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
     t0 = time.perf_counter()
     frames = [] if done is None else [done]
     have = 0 if done is None else len(done)
-    history = []
+    def estimate(r: Rate, elapsed: float | None) -> dict[str, Any]:
+        lo, hi = r.interval
+        return {"n": r.n, "n_pass": r.n_pass, "n_fail": r.n_fail,
+                "n_inconclusive": r.n_inconclusive, "yield": r.value, "ci_low": lo,
+                "ci_high": hi, "elapsed_s": elapsed}
+
+    # the estimates after each block an earlier, interrupted run finished, as a whole run has
+    # them (their times are that run's: not known)
+    history = [estimate(rate(done["result"].iloc[:m], level), None)
+               for m in range(block, have, block)] if done is not None else []
     walls: dict[str, float] = {}
     stop = f"n = {n} units sampled"
     while True:
         current = pd.concat(frames, ignore_index=True) if frames else None
         if current is not None and len(current):
             r = rate(current["result"], level)
-            lo, hi = r.interval
-            state = {"n": r.n, "n_pass": r.n_pass, "n_fail": r.n_fail,
-                     "n_inconclusive": r.n_inconclusive, "yield": r.value, "ci_low": lo,
-                     "ci_high": hi, "elapsed_s": time.perf_counter() - t0}
+            state = estimate(r, time.perf_counter() - t0)
             if not history or history[-1]["n"] != r.n:
                 history.append(state)
                 if progress is not None:

@@ -95,19 +95,6 @@ def _interrupt(signum: int, frame: object) -> None:
     raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
 
-def _exit_now(signum: int, frame: object) -> None:
-    """A signal after the command has finished (its folder is complete): exit at once with
-    128 + the signal's number, skipping the interpreter's teardown."""
-    import contextlib
-    import os
-    import sys
-
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(OSError, ValueError):
-            stream.flush()
-    os._exit(128 + signum)
-
-
 def run(args: list[str] | None = None) -> int:
     """Run the command line -> exit code. Usage errors (a bad option value, an unknown option
     or command) are one line, ``error: ...``, exit code 2, as every other bad input."""
@@ -155,9 +142,17 @@ def main() -> None:
     warnings.simplefilter("ignore", RuntimeWarning)
     warnings.filterwarnings("ignore", category=UserWarning, module="matplotlib")
     command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
-    code = run(sys.argv[1:])
-    for sig in (signal.SIGINT, signal.SIGTERM):  # the work is done: a late signal ends it now
-        signal.signal(sig, _exit_now)
+    try:
+        code = run(sys.argv[1:])
+    except KeyboardInterrupt:  # a signal after the command's own handling, before this line
+        from ema_cli.errors import SIGNALLED
+
+        code = 143 if signal.SIGTERM in SIGNALLED else 130
+    # the command is done (its folder finished, or left to complete): a signal now changes
+    # nothing, and the interpreter's teardown (which shuts down worker pools) would restore
+    # the default handlers, whose death by signal hides the exit code: ignored from here
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
     if command in FAST_EXIT:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -59,7 +59,8 @@ if TYPE_CHECKING:
 
 __all__ = ["SIGNALS_FILE", "BackgroundFigures", "SweepFolder", "default_cache_dir",
            "finish_sweep", "finished_sweep", "metric_label", "prepare_folder",
-           "remove_stale_temporaries", "save_sweep", "sweep_figures", "sweep_inputs",
+           "remove_stale_temporaries", "save_sweep", "stop_drawing", "sweep_figures",
+           "sweep_inputs",
            "write_manifest", "write_outputs"]
 
 
@@ -178,21 +179,40 @@ class BackgroundFigures:
         self.paths: list[Path] = []
         self.error: BaseException | None = None
         self.seconds = 0.0
+        self.stop = threading.Event()
+        self.done = threading.Event()  # set by the thread as it ends (``Thread.join`` once
+        # interrupted by a signal may return while the thread still runs)
         self.thread = threading.Thread(target=self._run, name="ema-figures", daemon=True)
+        _DRAWING.add(self)  # before it starts: an interrupt at any instant can stop it
         self.thread.start()
 
     def _run(self) -> None:
         t0 = time.perf_counter()
         try:
             assert self.result.folder is not None
-            self.paths = write_figures(self.result, self.result.folder / "figures")
+            self.paths = write_figures(self.result, self.result.folder / "figures", self.stop)
         except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
             self.error = exc
-        self.seconds = time.perf_counter() - t0
+        finally:
+            self.seconds = time.perf_counter() - t0
+            self.done.set()
+
+    def cancel(self) -> None:
+        """Stop drawing after the figure being written (it is written whole) and wait for the
+        thread: an interrupted command leaves no half-written file behind (and no thread in
+        native code when the process exits). The folder stays unfinished (the same command
+        completes it)."""
+        self.stop.set()
+        t0 = time.perf_counter()
+        while not self.done.wait(0.05):
+            if self.thread.ident is None and time.perf_counter() - t0 > 1.0:
+                break  # never started (interrupted in Thread.start)
+        _DRAWING.discard(self)
 
     def join(self) -> None:
         """Wait for the figures, then write the manifest and mark the folder finished."""
-        self.thread.join()
+        self.done.wait()
+        _DRAWING.discard(self)
         result = self.result
         result.figures = self.paths
         result.timings["figures"] = self.seconds
@@ -209,13 +229,24 @@ class BackgroundFigures:
         finish_if_complete(result)
 
 
+_DRAWING: set[BackgroundFigures] = set()
+"""The figure threads of this process still drawing (:func:`stop_drawing`)."""
+
+
+def stop_drawing() -> None:
+    """Stop every figure thread still drawing, after the figure it writes (an interrupted
+    command: its folder is left unfinished, every file in it whole)."""
+    for pending in list(_DRAWING):
+        pending.cancel()
+
+
 def finish_sweep(result: SweepResult) -> None:
     """Wait for figures drawn in the background (``SweepFolder(figures="background")``), write
     the final manifest and mark the folder finished; nothing to do otherwise."""
     pending = getattr(result, "pending", None)
     if pending is not None:
+        pending.join()  # interrupted here, it stays pending: cancel_sweep stops the thread
         result.pending = None
-        pending.join()
 
 
 def save_sweep(result: SweepResult, out: Path | None = None,
