@@ -56,6 +56,10 @@ def as_options(call: Callable[[], Any], *, anywhere: bool = True, **options: str
         raise EmaError(text) from None
 
 
+REPORTED: list[int] = []
+"""The exit codes :func:`interrupted` has reported (at most one message per command)."""
+
+
 def interrupted(exc: BaseException | None = None) -> int:
     """Say that the command was interrupted -> its exit code: 143 after SIGTERM, else 130
     (Ctrl-C). Finished work is kept: every file is written atomically, the output folder's
@@ -66,10 +70,13 @@ def interrupted(exc: BaseException | None = None) -> int:
     from ema_cli.errors import Terminated
 
     term = isinstance(exc, Terminated) or signal.SIGTERM in SIGNALLED
-    with contextlib.suppress(Exception):  # a closed stream: the exit code still says it
-        err_console.print(f"[yellow]{'terminated' if term else 'interrupted'}[/]: finished "
-                          "work was kept; the same command completes it")
-    return 143 if term else 130
+    code = 143 if term else 130
+    if not REPORTED:
+        with contextlib.suppress(Exception):  # a closed stream: the exit code still says it
+            err_console.print(f"[yellow]{'terminated' if term else 'interrupted'}[/]: "
+                              "finished work was kept; the same command completes it")
+    REPORTED.append(code)
+    return code
 
 
 def handle_errors(fn: F) -> F:
@@ -84,6 +91,7 @@ def handle_errors(fn: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         from ema_cli.cli.progress import stages
 
+        REPORTED.clear()  # one command, one message
         try:
             try:
                 sync_width()

@@ -125,6 +125,11 @@ def run(args: list[str] | None = None) -> int:
 
         typer.echo("interrupted", err=True)
         return 143 if signal.SIGTERM in SIGNALLED else 130
+    from ema_cli.cli.common import REPORTED, interrupted
+    from ema_cli.errors import SIGNALLED
+
+    if result == 130 and SIGNALLED and not REPORTED:  # typer's own code for a signal that
+        return interrupted()  # came before the command ran (Ctrl-C, or SIGTERM: 143)
     return result if isinstance(result, int) else 0
 
 
