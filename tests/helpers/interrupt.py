@@ -49,7 +49,7 @@ class Case:
     args: list[str]
     files: list[str]
     setup: Callable[[Path], None] | None = None
-    instants: int = 12
+    instants: int = 8
     timeout_s: float = 300.0
     notes: list[str] = field(default_factory=list)
 
@@ -176,6 +176,12 @@ def snapshot(folder: Path) -> dict[str, Any]:
 
             df = pd.read_csv(p) if suffix == ".csv" else pd.read_parquet(p)
             df = df[[c for c in df.columns if not VOLATILE.search(str(c))]]
+            if suffix == ".parquet" and "job" in df.columns:
+                # a sweep's signals.parquet is written as jobs finish: its rows come in the
+                # order of completion (a resumed sweep serves its cached jobs first), each
+                # job's samples in time order; the result is the rows of each job
+                df = df.assign(job=df["job"].astype(str)).sort_values(
+                    "job", kind="stable").reset_index(drop=True)
             out[rel] = _clean(json.loads(df.to_json(orient="split", double_precision=15)))
         elif suffix == ".json":
             out[rel] = _clean(json.loads(p.read_text()))

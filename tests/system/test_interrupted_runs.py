@@ -9,7 +9,7 @@ exit as a whole run does with the same numbers in its folder (CSV, Parquet, JSON
 values; times left out). The machinery: tests/helpers/interrupt.py.
 
 The slow tier (`make test-all`); EMA_INTERRUPT_INSTANTS sets the instants per command (the
-cases' own counts by default: 12, fewer for the slowest).
+cases' own counts by default: 8, 6 for design and the closed-loop fit, 4 for the quick writers).
 """
 
 from __future__ import annotations
@@ -105,7 +105,8 @@ def design_setup(work: Path) -> None:
 
 
 def reproduce_setup(work: Path) -> None:
-    write(work, "a.yaml", {**STUDY, "name": "a", "sweep": {"axes": []}})
+    write(work, "a.yaml", {**STUDY, "name": "a",
+                           "sweep": {"axes": [{"nonlinearity": "deadzone2", "values": [0.001]}]}})
     write(work, "b.yaml", {**STUDY, "name": "b",
                            "sweep": {"axes": [{"nonlinearity": "deadzone2",
                                                "values": [0.01, 0.1]}]}})
@@ -133,11 +134,11 @@ CASES = [
                     "tune.yaml", "--spec", "spec.yaml", "--budget", "16"],
          ["design.md", "design.json", "identification/identification.json",
           "tune/tuned.yaml", "acceptance/nominal/acceptance.csv", "manifest.json"],
-         design_setup, instants=8),
+         design_setup, instants=6),
     Case("identify-closed-loop", ["identify", "--closed-loop", "--data", "mk/closed_loop.csv",
                                   *CLOSED_LOOP],
          ["identification.json", "fit_*.png", "alpha_profile.png", "fitted.yaml",
-          "summary.md"], make_log, instants=10),
+          "summary.md"], make_log, instants=6),
     Case("identify-torque", ["identify", "--pop", "20", "--generations", "30", "--runs", "2"],
          ["identification.json", "runs.csv", "history.csv", "convergence.png", "fit.png",
           "manifest.json"]),
@@ -151,22 +152,22 @@ CASES = [
 ]
 FAST = [  # the other writers: quick runs, fewer instants
     Case("simulate", ["simulate", "--duration", "0.2", "--nl", "deadzone2=0.01"],
-         ["timeseries.csv", "metrics.csv", "tracking.png", "manifest.json"], instants=6),
+         ["timeseries.csv", "metrics.csv", "tracking.png", "manifest.json"], instants=4),
     Case("threshold", ["threshold", "study.yaml", "--vary", "deadzone2", "--range", "0.001",
                        "0.1", "--metric", "p2p_err_pos_deg", "--limit", "0.002"],
          ["threshold.json", "history.csv", "threshold.png"],
-         lambda w: write(w, "study.yaml", {**STUDY, "sweep": {"axes": []}}), instants=6),
+         lambda w: write(w, "study.yaml", {**STUDY, "sweep": {"axes": []}}), instants=4),
     Case("freqresp", ["freqresp", "--amplitudes", "1,5", "--f-min", "5", "--f-max", "20",
                       "--n", "3"],
-         ["freqresp.csv", "freqresp.json", "bode.png", "summary.md"], instants=6),
-    Case("margins", ["margins"], ["margins.json", "loops.csv", "margins.png"], instants=6),
+         ["freqresp.csv", "freqresp.json", "bode.png", "summary.md"], instants=4),
+    Case("margins", ["margins"], ["margins.json", "loops.csv", "margins.png"], instants=4),
     Case("make-data", ["identify", "--make-data", "closed-loop", "--set", "duration_s=0.5"],
-         ["closed_loop.csv", "closed_loop.truth.json", "manifest.json"], instants=6),
+         ["closed_loop.csv", "closed_loop.truth.json", "manifest.json"], instants=4),
     Case("friction-sweep", ["identify", "--friction-sweep", "--data", "fs/friction_sweep.csv"],
          ["identification.json", "friction_fit.png", "summary.md"],
          lambda w: subprocess.run([str(EMA), "identify", "--make-data", "friction-sweep",
                                    "--out", "fs"], cwd=w, check=True, capture_output=True),
-         instants=6),
+         instants=4),
 ]
 
 
