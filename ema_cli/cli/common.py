@@ -144,8 +144,10 @@ def parse_assignments(items: list[str] | None, option: str) -> list[tuple[str, s
     return out
 
 
-OUT_HELP = ("Output folder (default: a new folder under results/). It must be new or empty: "
-            "earlier results are never overwritten{resume}.")
+OUT_HELP = ("Output folder (default: a new folder under results/). It must be new or empty, or "
+            "hold a run of the same command and inputs: unfinished (interrupted), it is "
+            "completed; finished, it is kept as it is. Earlier results of other inputs are "
+            "never overwritten{resume}.")
 
 
 def out_help(resume: str = "") -> str:

@@ -277,7 +277,7 @@ def save_sweep(result: SweepResult, out: Path | None = None,
 
 
 def finish_if_complete(result: SweepResult) -> None:
-    """Mark the folder finished (``rundir.finish_output``: never resumed nor rewritten) once
+    """Mark the folder finished (``rundir.finish_output``: kept as it is, never rewritten) once
     every job finished: none pending, none failed, not interrupted."""
     counts = result.counts()
     if (result.folder is not None and not result.interrupted and not counts["pending"]
