@@ -194,7 +194,7 @@ def reproduce(experiment: str | Path, overrides: Overrides = None, *,
     from ema_cli.analysis.reproduce import load_experiment
     from ema_cli.report.reproduce_report import write_reproduction
     from ema_cli.report.run_inputs import run_inputs
-    from ema_cli.report.rundir import FINISHED, RESUMED, finish_output, prepare_output
+    from ema_cli.report.rundir import FINISHED, finish_output, prepare_output
 
     if not isinstance(experiment, str | Path):
         raise EmaError(f"experiment: expected the path of an experiment file, got "
@@ -204,9 +204,7 @@ def reproduce(experiment: str | Path, overrides: Overrides = None, *,
     exp = load_experiment(path, pairs)
     folder, state = prepare_output("reproduce", exp.name, run_inputs(exp, sets=pairs),
                                    folder_arg(out))
-    say = log or (lambda _text: None)
-    if state == RESUMED:
-        say(f"resuming the unfinished run in {folder}")
+    say = log or (lambda _text: None)  # a resumed or finished folder: prepare_output says so
     t0 = time.perf_counter()
     rep = run_experiment(path, folder, n_jobs=n_jobs, progress=progress, log=say, experiment=exp,
                          write=state != FINISHED)

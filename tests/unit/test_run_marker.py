@@ -149,3 +149,28 @@ def test_simulate_interrupted_while_writing_completes_on_the_same_command(tmp_pa
     assert (out / "timeseries.csv").read_text().startswith("t_s")
     r = CliRunner().invoke(app, args)
     assert r.exit_code == 0, r.output
+
+
+def test_tune_checks_its_own_interrupted_folder_as_the_same_inputs(tmp_path):
+    """Issue 42's root cause: `ema tune` checked --out before tuning with no inputs, so the
+    folder its own save() had left unfinished read as 'of other inputs'. The check and the
+    save now record the same inputs, from the same function."""
+    import yaml
+
+    from ema_cli.api.tune import tune_inputs
+
+    cfg = tmp_path / "tune.yaml"
+    cfg.write_text(yaml.safe_dump({
+        "name": "tiny", "simulation": {"duration_s": 0.3, "dt_s": 5.0e-5},
+        "scenarios": {"a": {"input": {"kind": "step", "amplitude_deg": 1.0}}},
+        "variables": {"Kpp": {"bounds": [20.0, 100.0], "scale": "log"}},
+        "optimiser": {"budget": 240, "pop": 12}}))
+    out = tmp_path / "run"
+    rundir.prepare_output("tune", "tiny", tune_inputs(cfg, [("optimiser.seed", "0")]), out)
+    rundir.write_text(out / "tuned.yaml", "x: 1\n")  # interrupted while writing
+    again = tune_inputs(cfg, [("optimiser.seed", "0")], budget=240)  # the config's budget
+    assert rundir.check_output(out, "tune", again) == rundir.RESUMED
+    with pytest.raises(EmaError, match=r"unfinished `ema tune` run of other inputs \(--set "
+                                       r"optimiser.seed 0 there, 3 here; --budget 240 there, "
+                                       r"96 here\)"):
+        rundir.check_output(out, "tune", tune_inputs(cfg, [("optimiser.seed", "3")], budget=96))
