@@ -14,3 +14,13 @@ class EmaError(Exception):
 
     def __str__(self) -> str:
         return self.message
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program runs: it stops as Ctrl-C does (finished work kept,
+    temporary files removed), and the command exits 143 (128 + 15) instead of 130."""
+
+
+SIGNALLED: list[int] = []
+"""The signals (SIGINT, SIGTERM) the command line received, in order: an exception raised
+after one (a worker process killed by the same signal, say) is reported as the interruption."""

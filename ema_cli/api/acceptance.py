@@ -31,6 +31,8 @@ class AcceptanceResult:
     params: dict[str, float]
     wall_time_s: float
     overrides: list[tuple[str, Any]] = field(default_factory=list)
+    inputs: Any = None
+    """What the folder's marker records (``report.run_inputs.RunInputs``)."""
 
     @property
     def verdict(self) -> str:
@@ -109,22 +111,38 @@ class AcceptanceResult:
         """Write acceptance.md, acceptance.csv, one figure per test, the spec and a manifest."""
         import yaml
 
-        from ema_cli.hashing import content_hash
         from ema_cli.report.acceptance_report import write_acceptance
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.rundir import write_run
 
         spec_json = self.spec.model_dump(mode="json", by_alias=True)
-        out, _ = prepare_output("acceptance", self.spec.name,
-                                content_hash({"spec": spec_json, "p": self.params}, 16),
-                                folder_arg(folder))
-        write_acceptance(out, yaml.safe_dump(spec_json, sort_keys=False), self,
-                         {"source": self.source, "wall_time_s": self.wall_time_s,
-                          "passed": self.passed, "verdict": self.verdict,
-                          "exit_code": self.exit_code, "parameters_si": self.params,
-                          "overrides": [[k, v] for k, v in self.overrides],
-                          "test_wall_s": {r.name: r.wall_s for r in self.runs}})
-        finish_output(out)
-        return out
+        inputs = self.inputs or _inputs(self.spec, self.overrides, [r.name for r in self.runs])
+        return write_run("acceptance", self.spec.name, inputs, folder_arg(folder),
+                         lambda out: write_acceptance(
+                             out, yaml.safe_dump(spec_json, sort_keys=False), self,
+                             {"source": self.source, "wall_time_s": self.wall_time_s,
+                              "passed": self.passed, "verdict": self.verdict,
+                              "exit_code": self.exit_code, "parameters_si": self.params,
+                              "overrides": [[k, v] for k, v in self.overrides],
+                              "test_wall_s": {r.name: r.wall_s for r in self.runs}}))
+
+
+def _inputs(spec: AcceptanceSpec, pairs: list[tuple[str, Any]], only: Sequence[str] | None
+            ) -> Any:
+    from ema_cli.report.run_inputs import run_inputs
+
+    return run_inputs(spec, sets=pairs, options={"only": list(only) if only else None})
+
+
+def acceptance_inputs(spec: ConfigSource, overrides: Overrides = None, *,
+                      only: Sequence[str] | None = None) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) an :func:`acceptance` with these arguments
+    records in its folder's marker: what ``ema acceptance`` checks ``--out`` against first."""
+    from ema_cli.api._inputs import names_arg
+    from ema_cli.config.acceptance import AcceptanceSpec
+    from ema_cli.config.loader import load_config
+
+    pairs = override_pairs(overrides)
+    return _inputs(load_config(spec, pairs, AcceptanceSpec), pairs, names_arg(only, "only"))
 
 
 def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
@@ -173,4 +191,5 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
         if progress is not None:
             progress(run)
     return AcceptanceResult(sp, str(spec) if isinstance(spec, str | Path) else "dict", runs,
-                            rows, params, time.perf_counter() - t0, pairs)
+                            rows, params, time.perf_counter() - t0, pairs,
+                            _inputs(sp, pairs, only))

@@ -100,6 +100,9 @@ class DesignResult:
     notes: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     overrides: list[tuple[str, Any]] = field(default_factory=list)
+    inputs: Any = None
+    """What the folder's marker records (``report.run_inputs.RunInputs``;
+    :func:`design_inputs`)."""
 
     @property
     def verdict(self) -> str:
@@ -162,20 +165,20 @@ class DesignResult:
     def save(self, folder: str | Path | None = None) -> Path:
         """Write the run folder: design.json, design.md, manifest.json and the three steps'
         folders (identification/, tune/, acceptance/<case>/) -> the folder."""
-        from ema_cli.hashing import content_hash
         from ema_cli.report.design_report import write_design
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.run_inputs import run_inputs
+        from ema_cli.report.rundir import write_run
 
-        out, _ = prepare_output("design", self.config.name,
-                                content_hash({"log": self.log, "cfg": self.config.model_dump(
-                                    mode="json"), "o": self.overrides}, 16), folder_arg(folder))
-        self.identification.save(out / "identification")
-        self.tuning.save(out / "tune")
-        for c in self.cases:
-            c.result.save(out / "acceptance" / c.name)
-        write_design(out, self)
-        finish_output(out)
-        return out
+        def write(out: Path) -> None:  # each step's folder is completed or kept like this one
+            self.identification.save(out / "identification")
+            self.tuning.save(out / "tune")
+            for c in self.cases:
+                c.result.save(out / "acceptance" / c.name)
+            write_design(out, self)
+
+        inputs = self.inputs or run_inputs(self.config, sets=self.overrides,
+                                           files={"log": self.log})
+        return write_run("design", self.config.name, inputs, folder_arg(folder), write)
 
 
 def design_verdict(inconclusive: list[str], cases: list[bool | str]) -> str:
@@ -437,4 +440,30 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
     tune_shown = ("the bundled configs/tune.yaml" if tune_path == DEFAULT_TUNE_CONFIG
                   else str(tune_path))
     return DesignResult(cfg, str(log), tune_shown, str(spec_path), ident, tuned, cases,
-                        plant, doubts, notes, timings, pairs)
+                        plant, doubts, notes, timings, pairs,
+                        _inputs(cfg, pairs, log, tune_path, spec_path, budget))
+
+
+def _inputs(cfg: DesignConfig, pairs: list[tuple[str, Any]], log: Path, tune_path: Path,
+            spec_path: Path, budget: int | None) -> Any:
+    from ema_cli.report.run_inputs import run_inputs
+
+    # the --set pairs go to the steps, not into the design config: their values are inputs
+    return run_inputs(cfg, sets=pairs, options={"budget": budget},
+                      files={"log": log, "tune config": tune_path, "spec": spec_path}
+                      ).with_components(**{k: v for k, v in pairs})
+
+
+def design_inputs(log: str | Path, config: ConfigSource = None, overrides: Overrides = None, *,
+                  tune_config: str | Path | None = None, spec: str | Path | None = None,
+                  budget: int | None = None) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) a :func:`design` with these arguments
+    records in its folder's marker: the design config, the --set paths, --budget and the
+    SHA-256 of the log, the tuning config and the spec (what ``ema design`` checks ``--out``
+    against first)."""
+    from ema_cli.config.loader import load_config
+
+    tune_path = Path(tune_config) if tune_config is not None else DEFAULT_TUNE_CONFIG
+    spec_path = Path(spec) if spec is not None else DEFAULT_SPEC
+    return _inputs(load_config(config, [], DesignConfig), override_pairs(overrides), Path(log),
+                   tune_path, spec_path, budget)

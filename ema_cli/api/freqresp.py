@@ -36,6 +36,8 @@ class FrequencyResponse:
     linear: np.ndarray
     wall_time_s: float
     overrides: list[tuple[str, Any]] = field(default_factory=list)
+    inputs: Any = None
+    """What the folder's marker records (``report.run_inputs.RunInputs``)."""
 
     @property
     def amplitudes(self) -> list[float]:
@@ -154,21 +156,19 @@ class FrequencyResponse:
         manifest."""
         import yaml
 
-        from ema_cli.hashing import content_hash
         from ema_cli.report.freqresp_report import write_freqresp
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.run_inputs import run_inputs
+        from ema_cli.report.rundir import write_run
 
         cfg_json = self.config.model_dump(mode="json")
-        out, _ = prepare_output("freqresp", self.config.name,
-                                content_hash({"cfg": cfg_json, "a": self.amplitudes,
-                                              "f": [p.f_hz for p in self.points]}, 16),
-                                folder_arg(folder))
-        write_freqresp(out, yaml.safe_dump(cfg_json, sort_keys=False), self,
-                       {"seed": self.config.seed, "wall_time_s": self.wall_time_s,
-                        "parameters_si": self.params,
-                        "overrides": [[k, v] for k, v in self.overrides]})
-        finish_output(out)
-        return out
+        inputs = self.inputs or run_inputs(self.config, sets=self.overrides, options={
+            "amplitudes": self.amplitudes, "frequencies": [p.f_hz for p in self.points]})
+        return write_run("freqresp", self.config.name, inputs, folder_arg(folder),
+                         lambda out: write_freqresp(
+                             out, yaml.safe_dump(cfg_json, sort_keys=False), self,
+                             {"seed": self.config.seed, "wall_time_s": self.wall_time_s,
+                              "parameters_si": self.params,
+                              "overrides": [[k, v] for k, v in self.overrides]}))
 
 
 def amplitude_list(values: Any, name: str = "amplitudes_deg") -> list[float]:
@@ -231,4 +231,28 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
     points = sinestream(params, amps, f, dt=cfg.simulation.dt_s)
     wall = time.perf_counter() - t0
     fs = np.array([p.f_hz for p in points[:n]])
-    return FrequencyResponse(cfg, params, points, linear_model(params).response(fs), wall, pairs)
+    return FrequencyResponse(cfg, params, points, linear_model(params).response(fs), wall, pairs,
+                             _inputs(cfg, pairs, amps, f_min_hz, f_max_hz, n))
+
+
+def _inputs(cfg: StudyConfig, pairs: list[tuple[str, Any]], amplitudes: Sequence[float],
+            f_min_hz: float, f_max_hz: float, n: int) -> Any:
+    from ema_cli.report.run_inputs import run_inputs
+
+    return run_inputs(cfg, sets=pairs, options={
+        "amplitudes": [float(a) for a in amplitudes], "f_min": float(f_min_hz),
+        "f_max": float(f_max_hz), "n": int(n)})
+
+
+def freqresp_inputs(config: ConfigSource = None, overrides: Overrides = None, *,
+                    amplitudes_deg: Sequence[float] = DEFAULT_AMPLITUDES_DEG,
+                    f_min_hz: float = DEFAULT_F_MIN_HZ, f_max_hz: float = DEFAULT_F_MAX_HZ,
+                    n: int = DEFAULT_N, nl: Mapping[str, Any] | None = None) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) a :func:`freqresp` with these arguments
+    records in its folder's marker: what ``ema freqresp`` checks ``--out`` against first."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.study import StudyConfig
+
+    pairs = override_pairs(overrides, nl)
+    return _inputs(load_config(config, pairs, StudyConfig), pairs,
+                   amplitude_list(amplitudes_deg), f_min_hz, f_max_hz, n)

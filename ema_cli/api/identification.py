@@ -83,16 +83,21 @@ class Identification:
 
     def save(self, folder: str | Path | None = None) -> Path:
         """Write the folder ``ema identify`` writes -> the folder (new or empty if given)."""
-        from ema_cli.hashing import content_hash
         from ema_cli.report.identify_figures import write_identification
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.rundir import write_run
 
-        settings = self.result.settings.model_dump(mode="json")
-        out, _ = prepare_output("identify", "torque", content_hash(settings, 16),
-                                folder_arg(folder))
-        write_identification(self.result, out, command="identify")
-        finish_output(out)
-        return out
+        return write_run("identify", "torque", identification_inputs(self.result.settings),
+                         folder_arg(folder),
+                         lambda out: write_identification(self.result, out, command="identify"))
+
+
+def identification_inputs(settings: IdentifySettings) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) an identification with the validated
+    ``settings`` records in its folder's marker: every setting, and the data file's SHA-256
+    (what ``ema identify`` checks ``--out`` against first)."""
+    from ema_cli.report.run_inputs import run_inputs
+
+    return run_inputs(settings, files={"data": getattr(settings, "data", None)})
 
 
 def load_settings(config: ConfigSource = None, overrides: Overrides = None

@@ -31,15 +31,50 @@ def _parameters_frame(js: dict[str, Any]) -> pd.DataFrame:
                          for n, v in js["parameters"].items()])
 
 
-def _save(command: str, name: str, settings: dict[str, Any], folder: str | Path | None,
+def _save(command: str, name: str, settings: Any, folder: str | Path | None,
           write: Any) -> Path:
-    from ema_cli.hashing import content_hash
-    from ema_cli.report.rundir import finish_output, prepare_output
+    from ema_cli.report.rundir import write_run
 
-    out, _ = prepare_output(command, name, content_hash(settings, 16), folder_arg(folder))
-    write(out)
-    finish_output(out)
-    return out
+    return write_run(command, name, log_inputs(settings), folder_arg(folder), write)
+
+
+def log_inputs(settings: Any) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) a log identification or synthetic log
+    with the validated ``settings`` records in its folder's marker: every setting, and the data
+    file's SHA-256 (what ``ema identify`` checks ``--out`` against first)."""
+    from ema_cli.report.run_inputs import run_inputs
+
+    return run_inputs(settings, files={"data": getattr(settings, "data", None)})
+
+
+def closed_loop_inputs(config: ConfigSource = None, overrides: Overrides = None,
+                       **settings: Any) -> Any:
+    """:func:`log_inputs` of :func:`identify_closed_loop` with these arguments."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.log_settings import ClosedLoopSettings
+
+    pairs = override_pairs(overrides) + list(settings.items())
+    return log_inputs(load_config(config, pairs, ClosedLoopSettings))
+
+
+def friction_sweep_inputs(config: ConfigSource = None, overrides: Overrides = None,
+                          **settings: Any) -> Any:
+    """:func:`log_inputs` of :func:`identify_friction_sweep` with these arguments."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.log_settings import FrictionSweepSettings
+
+    pairs = override_pairs(overrides) + list(settings.items())
+    return log_inputs(load_config(config, pairs, FrictionSweepSettings))
+
+
+def make_data_inputs(config: ConfigSource = None, overrides: Overrides = None,
+                     **settings: Any) -> Any:
+    """:func:`log_inputs` of :func:`make_identification_data` with these arguments."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.identify.log_settings import MakeDataSettings
+
+    pairs = override_pairs(overrides) + list(settings.items())
+    return log_inputs(load_config(config, pairs, MakeDataSettings))
 
 
 @dataclass
@@ -83,7 +118,7 @@ class ClosedLoopIdentification:
         from ema_cli.report.log_identify_report import write_closed_loop
 
         s = self.result.settings
-        return _save("identify", s.name, s.model_dump(mode="json"), folder,
+        return _save("identify", s.name, s, folder,
                      lambda out: write_closed_loop(self.result, out))
 
 
@@ -124,7 +159,7 @@ class FrictionSweepIdentification:
         from ema_cli.report.log_identify_report import write_friction_sweep
 
         js = self.settings.model_dump(mode="json")
-        return _save("identify", self.settings.name, js, folder,
+        return _save("identify", self.settings.name, self.settings, folder,
                      lambda out: write_friction_sweep(self.result, out, js))
 
 
@@ -162,7 +197,7 @@ class SyntheticData:
         from ema_cli.report.log_identify_report import write_synthetic
 
         js = self.settings.model_dump(mode="json")
-        return _save("identify", f"data-{self.log.kind}", js, folder,
+        return _save("identify", f"data-{self.log.kind}", self.settings, folder,
                      lambda out: write_synthetic(self.log, out, js))
 
 

@@ -31,6 +31,8 @@ class LoopMargins:
     loops: dict[str, np.ndarray]
     notes: list[str] = field(default_factory=list)
     overrides: list[tuple[str, Any]] = field(default_factory=list)
+    inputs: Any = None
+    """What the folder's marker records (``report.run_inputs.RunInputs``)."""
 
     @property
     def metrics(self) -> pd.DataFrame:
@@ -74,21 +76,20 @@ class LoopMargins:
         """Write margins.json, loops.csv, margins.png, the resolved config and a manifest."""
         import yaml
 
-        from ema_cli.hashing import content_hash
         from ema_cli.report.margins_report import write_margins
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.run_inputs import run_inputs
+        from ema_cli.report.rundir import write_run
 
         cfg_json = self.config.model_dump(mode="json")
-        out, _ = prepare_output("margins", self.config.name,
-                                content_hash({"cfg": cfg_json}, 16), folder_arg(folder))
-        write_margins(out, yaml.safe_dump(cfg_json, sort_keys=False), self.f_hz, self.loops,
-                      self.result, self.title,
-                      {"seed": self.config.seed, "parameters_si": self.params,
-                       "overrides": [[k, v] for k, v in self.overrides],
-                       "margins": {k: m.to_json() for k, m in self.result.items()}},
-                      self.notes)
-        finish_output(out)
-        return out
+        inputs = self.inputs or run_inputs(self.config, sets=self.overrides)
+        return write_run("margins", self.config.name, inputs, folder_arg(folder),
+                         lambda out: write_margins(
+                             out, yaml.safe_dump(cfg_json, sort_keys=False), self.f_hz,
+                             self.loops, self.result, self.title,
+                             {"seed": self.config.seed, "parameters_si": self.params,
+                              "overrides": [[k, v] for k, v in self.overrides],
+                              "margins": {k: m.to_json() for k, m in self.result.items()}},
+                             self.notes))
 
 
 def margins(config: ConfigSource = None, overrides: Overrides = None) -> LoopMargins:
@@ -114,4 +115,17 @@ def margins(config: ConfigSource = None, overrides: Overrides = None) -> LoopMar
     f = np.geomspace(F_MIN_HZ, F_MAX_HZ, N_FREQ)
     result = {loop: loop_margins(params, loop) for loop in LOOPS}
     loops = {loop: loop_transfer(params, loop, f) for loop in LOOPS}
-    return LoopMargins(cfg, params, result, f, loops, notes, pairs)
+    from ema_cli.report.run_inputs import run_inputs
+
+    return LoopMargins(cfg, params, result, f, loops, notes, pairs, run_inputs(cfg, sets=pairs))
+
+
+def margins_inputs(config: ConfigSource = None, overrides: Overrides = None) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) :func:`margins` records in its folder's
+    marker: what ``ema margins`` checks ``--out`` against first."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.study import StudyConfig
+    from ema_cli.report.run_inputs import run_inputs
+
+    pairs = override_pairs(overrides)
+    return run_inputs(load_config(config, pairs, StudyConfig), sets=pairs)

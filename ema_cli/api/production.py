@@ -44,6 +44,8 @@ class YieldResult:
     worst: WorstCase | None = None
     folder: Path | None = None
     resumed_units: int = 0
+    inputs: Any = None
+    """What the folder's marker records (``report.run_inputs.RunInputs``)."""
 
     @property
     def overall(self) -> Rate:
@@ -119,17 +121,19 @@ class YieldResult:
         """Write yield.json, samples.parquet, yield.md, the figures, the spec and tolerance
         snapshots and a manifest (into the checkpoint folder when there is one and ``folder``
         is None or the same)."""
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.rundir import FINISHED, finish_output, prepare_output, read_marker
         from ema_cli.report.yield_report import write_yield
 
         target = folder_arg(folder)
         if self.folder is not None and (target is None or Path(target) == self.folder):
             out = self.folder
+            state = FINISHED if (read_marker(out) or {}).get("finished") is True else ""
         else:
-            out, _ = prepare_output(COMMAND, self.plan.spec.name, self.settings["fingerprint"],
-                                    target)
-        write_yield(out, self)
-        finish_output(out)
+            out, state = prepare_output(COMMAND, self.plan.spec.name,
+                                        self.inputs or self.settings["fingerprint"], target)
+        if state != FINISHED:  # the finished run of these inputs is kept as it is
+            write_yield(out, self)
+            finish_output(out)
         self.folder = out
         return out
 
@@ -230,14 +234,21 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
                 "target_halfwidth": target_halfwidth, "k": plan.tolerances.k, "block": block,
                 "worst_budget": worst_budget, "fingerprint": fp,
                 "overrides": [[a, b] for a, b in plan.overrides]}
+    from ema_cli.report.run_inputs import run_inputs
+
+    inputs = run_inputs(plan.spec, sets=plan.overrides,
+                        parts={"tolerances": plan.tolerances.to_dict()},
+                        options={"n": n, "seed": seed, "method": method, "ci": float(level),
+                                 "target_halfwidth": target_halfwidth, "k": plan.tolerances.k,
+                                 "block": block, "worst_budget": worst_budget,
+                                 "drivers": drivers})
     folder, done = None, None
     if checkpoint:
-        from ema_cli.report.rundir import prepare_output
+        from ema_cli.report.rundir import FINISHED, NEW, prepare_output
         from ema_cli.report.yield_report import read_blocks, write_plan
 
-        folder, resumed = prepare_output(COMMAND, plan.spec.name, fp, folder_arg(out),
-                                         resume=True)
-        done, rows = read_blocks(folder) if resumed else (None, None)
+        folder, state = prepare_output(COMMAND, plan.spec.name, inputs, folder_arg(out))
+        done, rows = read_blocks(folder) if state != NEW else (None, None)
         if done is not None and len(done) > n:  # asked for fewer than were run: the first n
             done = done.iloc[:n].reset_index(drop=True)
         if done is not None:
@@ -246,9 +257,12 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
             announce(f"resuming the run in {folder}: {len(done)} units already done")
         if rows:
             plan.rows = rows
-        write_plan(folder, plan, settings)
-    return _run(plan, settings, folder, done, n, level, target_halfwidth, block, worst_budget,
-                drivers, progress)
+        if state != FINISHED:
+            write_plan(folder, plan, settings)
+    res = _run(plan, settings, folder, done, n, level, target_halfwidth, block, worst_budget,
+               drivers, progress)
+    res.inputs = inputs
+    return res
 
 
 def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
@@ -264,17 +278,23 @@ def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
     t0 = time.perf_counter()
     frames = [] if done is None else [done]
     have = 0 if done is None else len(done)
-    history = []
+    def estimate(r: Rate, elapsed: float | None) -> dict[str, Any]:
+        lo, hi = r.interval
+        return {"n": r.n, "n_pass": r.n_pass, "n_fail": r.n_fail,
+                "n_inconclusive": r.n_inconclusive, "yield": r.value, "ci_low": lo,
+                "ci_high": hi, "elapsed_s": elapsed}
+
+    # the estimates after each block an earlier, interrupted run finished, as a whole run has
+    # them (their times are that run's: not known)
+    history = [estimate(rate(done["result"].iloc[:m], level), None)
+               for m in range(block, have, block)] if done is not None else []
     walls: dict[str, float] = {}
     stop = f"n = {n} units sampled"
     while True:
         current = pd.concat(frames, ignore_index=True) if frames else None
         if current is not None and len(current):
             r = rate(current["result"], level)
-            lo, hi = r.interval
-            state = {"n": r.n, "n_pass": r.n_pass, "n_fail": r.n_fail,
-                     "n_inconclusive": r.n_inconclusive, "yield": r.value, "ci_low": lo,
-                     "ci_high": hi, "elapsed_s": time.perf_counter() - t0}
+            state = estimate(r, time.perf_counter() - t0)
             if not history or history[-1]["n"] != r.n:
                 history.append(state)
                 if progress is not None:

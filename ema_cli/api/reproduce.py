@@ -118,9 +118,11 @@ def identification_summary(settings: Any, out: Path | None = None,
 
 def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
                    progress: bool = True, log: Any = print,
-                   experiment: ExperimentConfig | None = None) -> Reproduction:
+                   experiment: ExperimentConfig | None = None,
+                   write: bool = True) -> Reproduction:
     """Run the whole batch into ``out``; returns the computed Reproduction. ``experiment``: the
-    validated experiment file (default: read from ``path``).
+    validated experiment file (default: read from ``path``). ``write`` False: ``out`` holds the
+    finished run of this batch; nothing is written into it (its studies are read).
 
     Each study's sweep folder goes to ``out/studies/<id>``, the identification's to
     ``out/identification``; ``report.reproduce_report.write_reproduction`` writes the report.
@@ -171,8 +173,8 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
     if rep.exp.identification is not None:
         t0 = time.perf_counter()
         log("identification (paper §3.1)")
-        add_identification(rep, identification_summary(rep.exp.identification.settings,
-                                                        out / "identification"))
+        add_identification(rep, identification_summary(
+            rep.exp.identification.settings, out / "identification" if write else None))
         rep.timings["identification"] = time.perf_counter() - t0
     return conclude(rep)
 
@@ -190,9 +192,9 @@ def reproduce(experiment: str | Path, overrides: Overrides = None, *,
     log       ``log(text)``: one line per stage as it starts (default: silent)
     """
     from ema_cli.analysis.reproduce import load_experiment
-    from ema_cli.hashing import content_hash
     from ema_cli.report.reproduce_report import write_reproduction
-    from ema_cli.report.rundir import finish_output, prepare_output
+    from ema_cli.report.run_inputs import run_inputs
+    from ema_cli.report.rundir import FINISHED, finish_output, prepare_output
 
     if not isinstance(experiment, str | Path):
         raise EmaError(f"experiment: expected the path of an experiment file, got "
@@ -200,15 +202,16 @@ def reproduce(experiment: str | Path, overrides: Overrides = None, *,
     path = Path(experiment)
     pairs = override_pairs(overrides)
     exp = load_experiment(path, pairs)
-    folder, resumed = prepare_output("reproduce", exp.name,
-                                     content_hash({"exp": exp.model_dump(mode="json")}, 16),
-                                     folder_arg(out), resume=True)
-    say = log or (lambda _text: None)
-    if resumed:
-        say(f"resuming the unfinished run in {folder}")
+    folder, state = prepare_output("reproduce", exp.name, run_inputs(exp, sets=pairs),
+                                   folder_arg(out))
+    say = log or (lambda _text: None)  # a resumed or finished folder: prepare_output says so
     t0 = time.perf_counter()
-    rep = run_experiment(path, folder, n_jobs=n_jobs, progress=progress, log=say, experiment=exp)
+    rep = run_experiment(path, folder, n_jobs=n_jobs, progress=progress, log=say, experiment=exp,
+                         write=state != FINISHED)
     wall = time.perf_counter() - t0
-    report = write_reproduction(rep, folder, wall)
-    finish_output(folder)
+    if state == FINISHED:  # the finished run of this batch: kept as it is
+        report = folder / "REPORT.md"
+    else:
+        report = write_reproduction(rep, folder, wall)
+        finish_output(folder)
     return ReproduceResult(rep, folder, report, wall, pairs)

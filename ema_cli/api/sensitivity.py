@@ -139,7 +139,7 @@ def run_sensitivity(
     On Ctrl-C the manifest says ``interrupted`` and the exception propagates; the finished
     samples are in the job cache for the rerun.
     """
-    from ema_cli.report.rundir import check_output, finish_output
+    from ema_cli.report.rundir import FINISHED, check_output, finish_output
     from ema_cli.report.sensitivity_report import (
         COMMAND,
         fingerprint,
@@ -156,11 +156,10 @@ def run_sensitivity(
         method, n = resolve_method(cfg, method, n)
         if cache_dir is None:
             cache_dir = default_cache_dir(out)
-        fp = fingerprint(cfg, method, n)
-        if reuse_finished and out is not None and finished_study(Path(out), fp):
+        fp = fingerprint(cfg, method, n, overrides)
+        kept = reuse_finished and out is not None and finished_study(Path(out), fp)
+        if kept or check_output(out, COMMAND, fp) == FINISHED:  # kept as it is: no writes
             write, reused = False, True
-        else:
-            check_output(out, COMMAND, fp, resume=True)
 
     def on_start(res: SensitivityResult) -> None:
         if write:

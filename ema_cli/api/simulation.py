@@ -139,14 +139,18 @@ class Simulation:
         start-up path)."""
         import yaml
 
-        from ema_cli.hashing import content_hash
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.run_inputs import run_inputs
+        from ema_cli.report.rundir import FINISHED, finish_output, prepare_output
         from ema_cli.report.simulate_report import write_simulation
 
         cfg_json = self.config.model_dump(mode="json")
-        out, _ = prepare_output("simulate", self.config.name,
-                                content_hash({"cfg": cfg_json}, 16),
-                                folder_arg(folder))
+        out, state = prepare_output("simulate", self.config.name,
+                                    run_inputs(self.config, sets=self.overrides),
+                                    folder_arg(folder))
+        if state == FINISHED:  # the finished run of these inputs: kept as it is
+            if worker is not None:
+                worker.cancel()
+            return out
         timings = dict(self.timings)
         table = self.table() if self.batch.signals is not None else None
         if worker is not None:
@@ -210,26 +214,13 @@ def simulate(
     """
     import numpy as np
 
-    from ema_cli.api._inputs import number_arg
-    from ema_cli.config.loader import load_config, resolve_run
-    from ema_cli.config.study import StudyConfig
+    from ema_cli.config.loader import resolve_run
     from ema_cli.model.params import to_row
     from ema_cli.sim.grid import plan_steps, resolution_warnings
     from ema_cli.sim.runner import simulate_batch
 
     t0 = time.perf_counter()
-    number_arg(step_deg, "step_deg")
-    number_arg(duration_s, "duration_s", low=0.0, low_open=True)
-    number_arg(dt_s, "dt_s", low=0.0, low_open=True)
-    pairs = override_pairs(overrides)
-    if step_deg is not None:
-        pairs += [("input.kind", "step"), ("input.amplitude_deg", step_deg)]
-    if duration_s is not None:
-        pairs.append(("simulation.duration_s", duration_s))
-    if dt_s is not None:
-        pairs.append(("simulation.dt_s", dt_s))
-    pairs += override_pairs(None, nl)
-    cfg = load_config(config, pairs, StudyConfig)
+    cfg, pairs = _resolve(config, overrides, nl, step_deg, duration_s, dt_s)
     run = resolve_run(cfg, base_dir(config))
     n_steps, dec = plan_steps(run.duration, run.dt, run.output_interval)
     timings = {"config": time.perf_counter() - t0}
@@ -243,3 +234,37 @@ def simulate(
     return Simulation(cfg, run.params, run.signal, res, pairs, timings,
                       resolution_warnings(run.params, run.dt)
                       + inert_input_warnings(run.signal, run.duration))
+
+
+def _resolve(config: ConfigSource, overrides: Overrides, nl: Mapping[str, Any] | None,
+             step_deg: float | None, duration_s: float | None, dt_s: float | None
+             ) -> tuple[StudyConfig, list[tuple[str, Any]]]:
+    """The validated config of a run of :func:`simulate` and the overrides applied."""
+    from ema_cli.api._inputs import number_arg
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.study import StudyConfig
+
+    number_arg(step_deg, "step_deg")
+    number_arg(duration_s, "duration_s", low=0.0, low_open=True)
+    number_arg(dt_s, "dt_s", low=0.0, low_open=True)
+    pairs = override_pairs(overrides)
+    if step_deg is not None:
+        pairs += [("input.kind", "step"), ("input.amplitude_deg", step_deg)]
+    if duration_s is not None:
+        pairs.append(("simulation.duration_s", duration_s))
+    if dt_s is not None:
+        pairs.append(("simulation.dt_s", dt_s))
+    pairs += override_pairs(None, nl)
+    return load_config(config, pairs, StudyConfig), pairs
+
+
+def simulation_inputs(config: ConfigSource = None, overrides: Overrides = None, *,
+                      nl: Mapping[str, Any] | None = None, step_deg: float | None = None,
+                      duration_s: float | None = None, dt_s: float | None = None) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) a run of :func:`simulate` with these
+    arguments records in its folder's marker: what ``ema simulate`` checks ``--out`` against
+    before it simulates."""
+    from ema_cli.report.run_inputs import run_inputs
+
+    cfg, pairs = _resolve(config, overrides, nl, step_deg, duration_s, dt_s)
+    return run_inputs(cfg, sets=pairs)

@@ -33,6 +33,8 @@ class Threshold:
     log: bool
     wall_time_s: float
     overrides: list[tuple[str, Any]] = field(default_factory=list)
+    inputs: Any = None
+    """What the folder's marker records (``report.run_inputs.RunInputs``)."""
 
     @property
     def value(self) -> float:
@@ -86,21 +88,20 @@ class Threshold:
         """Write the folder ``ema threshold`` writes -> the folder (new or empty if given)."""
         import yaml
 
-        from ema_cli.hashing import content_hash
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.run_inputs import run_inputs
+        from ema_cli.report.rundir import write_run
         from ema_cli.report.threshold_report import write_threshold
 
         cfg_json = self.config.model_dump(mode="json")
-        summary = self.summary
-        out, _ = prepare_output("threshold", self.config.name,
-                                content_hash({"cfg": cfg_json, "s": summary}, 16),
-                                folder_arg(folder))
-        write_threshold(out, yaml.safe_dump(cfg_json, sort_keys=False), self.result,
-                        self.criteria, summary, f"{self.vary} [{self.unit}]", self.title,
-                        self.log, {"seed": self.config.seed, "wall_time_s": self.wall_time_s,
-                                   "overrides": [[k, v] for k, v in self.overrides]})
-        finish_output(out)
-        return out
+        inputs = self.inputs or run_inputs(self.config, sets=self.overrides, options={
+            "vary": self.vary, "require": [str(c) for c in self.criteria], "linear": not self.log})
+        return write_run("threshold", self.config.name, inputs, folder_arg(folder),
+                         lambda out: write_threshold(
+                             out, yaml.safe_dump(cfg_json, sort_keys=False), self.result,
+                             self.criteria, self.summary, f"{self.vary} [{self.unit}]",
+                             self.title, self.log,
+                             {"seed": self.config.seed, "wall_time_s": self.wall_time_s,
+                              "overrides": [[k, v] for k, v in self.overrides]}))
 
 
 def threshold(
@@ -136,6 +137,8 @@ def threshold(
     if not isinstance(vary, str) or not vary:
         raise EmaError(f"vary must be the name of a nonlinearity or parameter (str), got "
                        f"{vary!r}")
+    raw = dict(vary=vary, range=range, metric=metric, limit=limit, require=require,
+               direction=direction, log=log, rtol=rtol)
     criteria = [Criterion.parse(r) for r in names_arg(require, "require") or []]
     flag_arg(log, "log")
     if metric is not None and not isinstance(metric, str):
@@ -168,6 +171,7 @@ def threshold(
     pl = lookup(vary)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    inputs = _inputs(cfg, pairs, **raw)
     from ema_cli.model.nonlinearities import nonlinearity_updates
     from ema_cli.model.params import resolve
 
@@ -184,4 +188,30 @@ def threshold(
     res = find_threshold(ev, criteria, lo, hi, direction,  # type: ignore[arg-type]
                          log=log, rtol=rtol)
     return Threshold(cfg, vary, pl.unit, criteria, res, signal.describe(), log,
-                     time.perf_counter() - t0, pairs)
+                     time.perf_counter() - t0, pairs, inputs)
+
+
+def _inputs(cfg: StudyConfig, pairs: list[tuple[str, Any]], *, vary: str, range: Any,  # noqa: A002
+            metric: str | None, limit: float | None, require: Sequence[str], direction: str,
+            log: bool, rtol: float | None) -> Any:
+    from ema_cli.report.run_inputs import run_inputs
+
+    return run_inputs(cfg, sets=pairs, options={
+        "vary": vary, "range": None if range is None else list(range), "metric": metric,
+        "limit": limit, "require": list(require or ()), "direction": direction,
+        "linear": not log, "rtol": rtol})
+
+
+def threshold_inputs(config: ConfigSource, vary: str, range: tuple[float, float],  # noqa: A002
+                     *, metric: str | None = None, limit: float | None = None,
+                     require: Sequence[str] = (), direction: str = "max", log: bool = True,
+                     rtol: float | None = None, overrides: Overrides = None) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) a :func:`threshold` with these arguments
+    records in its folder's marker: what ``ema threshold`` checks ``--out`` against first."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.study import StudyConfig
+
+    pairs = override_pairs(overrides)
+    return _inputs(load_config(config, pairs, StudyConfig), pairs, vary=vary, range=range,
+                   metric=metric, limit=limit, require=require, direction=direction, log=log,
+                   rtol=rtol)

@@ -34,6 +34,8 @@ class TuneResult:
     outcome: TuneOutcome
     source: str
     overrides: list[tuple[str, Any]] = field(default_factory=list)
+    inputs: Any = None
+    """What the folder's marker records (``report.run_inputs.RunInputs``; :func:`tune_inputs`)."""
 
     # ------------------------------------------------------------------ values
     @property
@@ -213,18 +215,40 @@ class TuneResult:
         the resolved config and a manifest."""
         import yaml
 
-        from ema_cli.hashing import content_hash
-        from ema_cli.report.rundir import finish_output, prepare_output
+        from ema_cli.report.rundir import write_run
         from ema_cli.report.tune_report import write_tuning
 
         cfg_json = self.config.model_dump(mode="json", by_alias=True)
-        out, _ = prepare_output("tune", self.config.name,
-                                content_hash({"cfg": cfg_json, "method": self.outcome.method,
-                                              "runs": len(self.outcome.runs)}, 16),
-                                folder_arg(folder))
-        write_tuning(out, yaml.safe_dump(cfg_json, sort_keys=False), self)
-        finish_output(out)
-        return out
+        inputs = self.inputs or _inputs(self.config, self.overrides, self.outcome.method,
+                                        len(self.outcome.runs), None)
+        return write_run("tune", self.config.name, inputs, folder_arg(folder),
+                         lambda out: write_tuning(out, yaml.safe_dump(cfg_json,
+                                                                      sort_keys=False), self))
+
+
+def _inputs(cfg: TuneConfig, pairs: list[tuple[str, Any]], method: str | None,
+            runs: int | None, budget: int | None) -> Any:
+    """The marker's inputs of a tuning: the resolved config, the effective --method, --runs
+    and --budget (the config's when not given), the --set paths."""
+    from ema_cli.report.run_inputs import run_inputs
+
+    o = cfg.optimiser
+    return run_inputs(cfg, sets=pairs, options={"method": method or o.method,
+                                                "runs": runs or o.runs,
+                                                "budget": budget or o.budget})
+
+
+def tune_inputs(config: ConfigSource, overrides: Overrides = None, *,
+                method: str | None = None, runs: int | None = None,
+                budget: int | None = None) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) a :func:`tune` with these arguments
+    records in its folder's marker: what ``ema tune`` checks ``--out`` against before it
+    tunes."""
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.tune import TuneConfig
+
+    pairs = override_pairs(overrides)
+    return _inputs(load_config(config, pairs, TuneConfig), pairs, method, runs, budget)
 
 
 def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
@@ -288,7 +312,7 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S)
     outcome.actuator_document = actuator_doc
     res = TuneResult(cfg, outcome, str(config) if isinstance(config, str | Path) else "dict",
-                     pairs)
+                     pairs, _inputs(cfg, pairs, method, runs, budget))
     if not outcome.feasible:
         raise EmaError(infeasible_message(res))
     return res

@@ -116,12 +116,16 @@ def acceptance_cmd(
 
         raise EmaError(f"spec '{spec}' is not a file (an acceptance spec, e.g. "
                        "configs/acceptance.yaml)")
-    check_output(out, "acceptance")
+    pairs = parse_assignments(set_, "--set")
+    if out is not None:  # its inputs against the folder's, before the battery
+        from ema_cli.api.acceptance import acceptance_inputs
+
+        check_output(out, "acceptance", as_options(
+            lambda: acceptance_inputs(spec, pairs, only=only), only="--only"))
 
     def progress(run: object) -> None:
         err_console.print(f"  {run.name} ({run.kind}) {run.wall_s:.2f} s")  # type: ignore[attr-defined]
 
-    pairs = parse_assignments(set_, "--set")
     res = as_options(lambda: acceptance(spec, pairs, only=only, progress=progress),
                      only="--only")
     report_stage("writing files and figures")

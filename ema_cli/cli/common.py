@@ -12,7 +12,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from ema_cli.errors import EmaError
+from ema_cli.errors import SIGNALLED, EmaError
 
 console = Console(highlight=False)
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
@@ -56,8 +56,33 @@ def as_options(call: Callable[[], Any], *, anywhere: bool = True, **options: str
         raise EmaError(text) from None
 
 
+REPORTED: list[int] = []
+"""The exit codes :func:`interrupted` has reported (at most one message per command)."""
+
+
+def interrupted(exc: BaseException | None = None) -> int:
+    """Say that the command was interrupted -> its exit code: 143 after SIGTERM, else 130
+    (Ctrl-C). Finished work is kept: every file is written atomically, the output folder's
+    marker says whether the run finished, and the same command completes it."""
+    import contextlib
+    import signal
+
+    from ema_cli.errors import Terminated
+
+    term = isinstance(exc, Terminated) or signal.SIGTERM in SIGNALLED
+    code = 143 if term else 130
+    if not REPORTED:
+        with contextlib.suppress(Exception):  # a closed stream: the exit code still says it
+            err_console.print(f"[yellow]{'terminated' if term else 'interrupted'}[/]: "
+                              "finished work was kept; the same command completes it")
+    REPORTED.append(code)
+    return code
+
+
 def handle_errors(fn: F) -> F:
-    """Turn EmaError (and Ctrl-C) into one clear message and an exit code, never a traceback.
+    """Turn EmaError (and Ctrl-C, SIGTERM) into one clear message and an exit code, never a
+    traceback: 2 (or the error's code) for EmaError, 130 for Ctrl-C, 143 for SIGTERM (also when
+    the signal surfaces as another exception, e.g. a worker process it killed).
 
     The message is printed literally (escaped), so ``[dask]`` or ``[deg]`` survive rich markup.
     """
@@ -66,30 +91,36 @@ def handle_errors(fn: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         from ema_cli.cli.progress import stages
 
-        sync_width()
+        REPORTED.clear()  # one command, one message
         try:
-            with stages(fn.__name__.removesuffix("_cmd"), console, err_console):
-                return fn(*args, **kwargs)
-        except EmaError as exc:
-            err_console.print(f"[bold red]error:[/] {escape(printable(exc.message))}")
-            raise typer.Exit(exc.exit_code) from None
-        except KeyboardInterrupt:
-            err_console.print("[yellow]interrupted[/]: finished work was kept")
-            raise typer.Exit(130) from None
-        except (typer.Exit, typer.Abort, typer.TyperException):  # usage errors: typer's
-            raise
-        except MemoryError:
-            err_console.print("[bold red]error:[/] out of memory; ask for less (a shorter "
-                              "simulation.duration_s, a larger simulation.output_interval_s, "
-                              "fewer jobs)")
-            raise typer.Exit(1) from None
-        except Exception as exc:  # a bug, not the user's input: one line unless debugging
-            if os.environ.get("EMA_DEBUG"):
+            try:
+                sync_width()
+                with stages(fn.__name__.removesuffix("_cmd"), console, err_console):
+                    return fn(*args, **kwargs)
+            except (typer.Exit, typer.Abort, typer.TyperException):  # usage errors: typer's
                 raise
-            text = escape(" ".join(str(exc).split()))[:300]
-            err_console.print(f"[bold red]error:[/] unexpected {type(exc).__name__}: {text} "
-                              "(a bug in ema; set EMA_DEBUG=1 to see the traceback)")
-            raise typer.Exit(1) from None
+            except KeyboardInterrupt as exc:
+                raise typer.Exit(interrupted(exc)) from None
+            except Exception as exc:
+                if SIGNALLED:  # raised because of the signal
+                    raise typer.Exit(interrupted(exc)) from None
+                if isinstance(exc, EmaError):
+                    err_console.print(f"[bold red]error:[/] {escape(printable(exc.message))}")
+                    raise typer.Exit(exc.exit_code) from None
+                if isinstance(exc, MemoryError):
+                    err_console.print("[bold red]error:[/] out of memory; ask for less (a "
+                                      "shorter simulation.duration_s, a larger "
+                                      "simulation.output_interval_s, fewer jobs)")
+                    raise typer.Exit(1) from None
+                if os.environ.get("EMA_DEBUG"):
+                    raise
+                text = escape(" ".join(str(exc).split()))[:300]
+                err_console.print(f"[bold red]error:[/] unexpected {type(exc).__name__}: "
+                                  f"{text} (a bug in ema; set EMA_DEBUG=1 to see the "
+                                  "traceback)")
+                raise typer.Exit(1) from None
+        except KeyboardInterrupt as exc:  # a second signal while the first was reported
+            raise typer.Exit(interrupted(exc)) from None
 
     return wrapper  # type: ignore[return-value]
 
@@ -113,8 +144,10 @@ def parse_assignments(items: list[str] | None, option: str) -> list[tuple[str, s
     return out
 
 
-OUT_HELP = ("Output folder (default: a new folder under results/). It must be new or empty: "
-            "earlier results are never overwritten{resume}.")
+OUT_HELP = ("Output folder (default: a new folder under results/). It must be new or empty, or "
+            "hold a run of the same command and inputs: unfinished (interrupted), it is "
+            "completed; finished, it is kept as it is. Earlier results of other inputs are "
+            "never overwritten{resume}.")
 
 
 def out_help(resume: str = "") -> str:

@@ -57,8 +57,12 @@ def design_cmd(
     if config is not None and not config.is_file():
         raise EmaError(f"config '{config}' is not a file (a design config, e.g. "
                        "configs/design.yaml)")
-    check_output(out, "design")
     pairs = parse_assignments(set_, "--set")
+    if out is not None:  # its inputs against the folder's, before the identification
+        from ema_cli.api.design import design_inputs
+
+        check_output(out, "design", design_inputs(log, config, pairs, tune_config=tune_config,
+                                                  spec=spec, budget=budget))
     res = as_options(lambda: design(log, config, pairs, tune_config=tune_config, spec=spec,
                                     budget=budget, stage=report_stage,
                                     tune_log=lambda text: err_console.print(text,

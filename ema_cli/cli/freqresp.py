@@ -64,8 +64,15 @@ def freqresp_cmd(
     check_number(f_min, "--f-min", low=0.0, low_open=True)
     check_number(f_max, "--f-max", low=0.0, low_open=True)
     check_number(n, "--n", low=2, high=2000)
-    check_output(out, "freqresp")
+    check_output(out, "freqresp")  # a file, a folder of another command: refused at once
     pairs, nls = parse_assignments(set_, "--set"), dict(parse_assignments(nl, "--nl"))
+    if out is not None:  # its inputs against the folder's, before the sinestreams
+        from ema_cli.api.freqresp import freqresp_inputs
+
+        check_output(out, "freqresp", as_options(
+            lambda: freqresp_inputs(config, pairs, amplitudes_deg=amps, f_min_hz=f_min,
+                                    f_max_hz=f_max, n=n, nl=nls),
+            f_min_hz="--f-min", f_max_hz="--f-max", amplitudes_deg="--amplitudes"))
     res = as_options(lambda: freqresp(config, pairs, amplitudes_deg=amps, f_min_hz=f_min,
                                       f_max_hz=f_max, n=n, nl=nls),
                      f_min_hz="--f-min", f_max_hz="--f-max", amplitudes_deg="--amplitudes")

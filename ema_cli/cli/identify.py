@@ -199,10 +199,10 @@ def identify_cmd(
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")
-    from ema_cli.api.identification import identify, load_settings
+    from ema_cli.api.identification import identification_inputs, identify, load_settings
     from ema_cli.report.rundir import check_output
 
-    check_output(out, "identify")
+    check_output(out, "identify")  # a file, a folder of another command: refused at once
 
     for value, option in ((k_range, "--k-range"), (alpha_range, "--alpha-range"),
                           (c_range, "--c-range")):
@@ -225,6 +225,8 @@ def identify_cmd(
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
                        "with --data")
+    if out is not None:  # its inputs against the folder's, before the identification
+        check_output(out, "identify", identification_inputs(settings))
     report_stage(f"identification ({settings.method}, {settings.runs} run(s))")
     ident = identify(settings)
     report_stage("writing files and figures")

@@ -176,8 +176,11 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
 
 
 def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:
-    from ema_cli.api.identify_logs import make_identification_data
+    from ema_cli.api.identify_logs import make_data_inputs, make_identification_data
+    from ema_cli.report.rundir import check_output
 
+    if out is not None:  # its inputs against the folder's, before the data are made
+        check_output(out, "identify", make_data_inputs(config, pairs))
     syn = make_identification_data(config, pairs)
     folder = syn.save(out)
     stem = syn.log.kind.replace("-", "_")
@@ -195,8 +198,11 @@ def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | No
 
 
 def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:
-    from ema_cli.api.identify_logs import identify_closed_loop
+    from ema_cli.api.identify_logs import closed_loop_inputs, identify_closed_loop
+    from ema_cli.report.rundir import check_output
 
+    if out is not None:  # its inputs against the folder's, before the fit
+        check_output(out, "identify", closed_loop_inputs(config, pairs))
     report_stage("reading the log, loading the kernel")
     ident = as_options(lambda: identify_closed_loop(config, pairs),
                        **{"with window (T0, T1) [s]": "with --window T0,T1",
@@ -228,8 +234,11 @@ def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | 
 
 def _friction_sweep(config: Path | None, pairs: list[tuple[str, Any]],
                     out: Path | None) -> None:
-    from ema_cli.api.identify_logs import identify_friction_sweep
+    from ema_cli.api.identify_logs import friction_sweep_inputs, identify_friction_sweep
+    from ema_cli.report.rundir import check_output
 
+    if out is not None:  # its inputs against the folder's, before the fit
+        check_output(out, "identify", friction_sweep_inputs(config, pairs))
     report_stage("fitting the friction curve")
     ident = identify_friction_sweep(config, pairs)
     fit = ident.result

@@ -84,9 +84,15 @@ LLVM and matplotlib takes ~0.45 s and does nothing these commands need; commands
 worker pools (sweep, identify, reproduce) exit normally so that the pools are shut down."""
 
 
-def _terminate(signum: int, frame: object) -> None:
-    """SIGTERM: stop like Ctrl-C (finished work kept, temporary files removed)."""
-    raise KeyboardInterrupt
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGINT (Ctrl-C) and SIGTERM: stop where the program runs (finished work kept, temporary
+    files removed); ``handle_errors`` exits 130 or 143."""
+    import signal
+
+    from ema_cli.errors import SIGNALLED, Terminated
+
+    SIGNALLED.append(signum)
+    raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
 
 def run(args: list[str] | None = None) -> int:
@@ -113,8 +119,17 @@ def run(args: list[str] | None = None) -> int:
     except typer.Exit as exc:
         return exc.exit_code
     except typer.Abort:
+        import signal
+
+        from ema_cli.errors import SIGNALLED
+
         typer.echo("interrupted", err=True)
-        return 130
+        return 143 if signal.SIGTERM in SIGNALLED else 130
+    from ema_cli.cli.common import REPORTED, interrupted
+    from ema_cli.errors import SIGNALLED
+
+    if result == 130 and SIGNALLED and not REPORTED:  # typer's own code for a signal that
+        return interrupted()  # came before the command ran (Ctrl-C, or SIGTERM: 143)
     return result if isinstance(result, int) else 0
 
 
@@ -125,13 +140,24 @@ def main() -> None:
     import sys
     import warnings
 
-    signal.signal(signal.SIGTERM, _terminate)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _interrupt)
     # numpy overflow warnings and matplotlib layout advice are not for the user of a command:
     # what matters is reported (divergence, limits) in the command's own words
     warnings.simplefilter("ignore", RuntimeWarning)
     warnings.filterwarnings("ignore", category=UserWarning, module="matplotlib")
     command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
-    code = run(sys.argv[1:])
+    try:
+        code = run(sys.argv[1:])
+    except KeyboardInterrupt:  # a signal after the command's own handling, before this line
+        from ema_cli.errors import SIGNALLED
+
+        code = 143 if signal.SIGTERM in SIGNALLED else 130
+    # the command is done (its folder finished, or left to complete): a signal now changes
+    # nothing, and the interpreter's teardown (which shuts down worker pools) would restore
+    # the default handlers, whose death by signal hides the exit code: ignored from here
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
     if command in FAST_EXIT:
         sys.stdout.flush()
         sys.stderr.flush()

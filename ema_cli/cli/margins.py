@@ -38,9 +38,13 @@ def margins_cmd(
     from ema_cli.progress import report
     from ema_cli.report.rundir import check_output
 
-    check_output(out, "margins")
+    pairs = parse_assignments(set_, "--set")
+    if out is not None:
+        from ema_cli.api.margins import margins_inputs
+
+        check_output(out, "margins", margins_inputs(config, pairs))
     report("linear model and margins")
-    res = margins(config, parse_assignments(set_, "--set"))
+    res = margins(config, pairs)
     report("writing files and figures")
     folder = res.save(out)
     rows = [(loop, *margins_cells(m)) for loop, m in res.result.items()]

@@ -129,13 +129,18 @@ def _simulate(config: Path | None, step: float | None, duration: float | None,
     overrides = parse_assignments(set_, "--set")
     from ema_cli.report.rundir import check_output
 
-    check_output(out, "simulate")
+    check_output(out, "simulate")  # a file, a folder of another command: refused at once
     t_start = time.perf_counter()
     for module in HEAVY_MODULES:  # imported here, timed as one part of the run
         if worker is None or "figures" not in module:  # the worker imports matplotlib
             importlib.import_module(module)
     t_imports = time.perf_counter() - t_start
     check_nl_options(nl_items)
+    if out is not None:  # checked before the simulation: its inputs against the folder's
+        from ema_cli.api.simulation import simulation_inputs
+
+        check_output(out, "simulate", simulation_inputs(
+            config, overrides, nl=dict(nl_items), step_deg=step, duration_s=duration, dt_s=dt))
     from ema_cli.api.simulation import simulate
     from ema_cli.progress import report
 

@@ -115,21 +115,27 @@ def sweep_cmd(
     if backend is not None and backend not in BACKENDS:
         raise EmaError(f"--backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
     overrides = parse_assignments(set_, "--set")
-    run = sweep(config, overrides, n_jobs=n_jobs, backend=backend, force=force,
-                progress=progress, scheduler=scheduler, cache_dir=cache_dir, out=out,
-                write=True, figures="none" if no_figures else "background")
-    result = run.result
-    for w in result.warnings:
-        err_console.print(f"[yellow]warning:[/] {w}")
-    for n in result.plan.notes:
-        console.print(f"note: {n}")
-    print_summary(run)
+    try:
+        run = sweep(config, overrides, n_jobs=n_jobs, backend=backend, force=force,
+                    progress=progress, scheduler=scheduler, cache_dir=cache_dir, out=out,
+                    write=True, figures="none" if no_figures else "background")
+        result = run.result
+        for w in result.warnings:
+            err_console.print(f"[yellow]warning:[/] {w}")
+        for n in result.plan.notes:
+            console.print(f"note: {n}")
+        print_summary(run)
+        if result.pending is not None:
+            err_console.print(f"drawing {len(result.plan.cfg.outputs.figures)} kinds of "
+                              "figures (--no-figures skips them) ...")
+            run.finish()
+    except BaseException:  # Ctrl-C while the figures are drawn: none left half-written
+        from ema_cli.report.sweep_report import stop_drawing
+
+        stop_drawing()
+        raise
     counts = result.counts()
     t = result.timings
-    if result.pending is not None:
-        err_console.print(f"drawing {len(result.plan.cfg.outputs.figures)} kinds of figures "
-                          "(--no-figures skips them) ...")
-        run.finish()
     figs = (f"; {len(result.figures)} figures {t['figures']:.1f} s" if "figures" in t
             else "; no figures" if no_figures else "")
     console.print(f"{result.computed} runs computed, {result.cached} cached; backend "

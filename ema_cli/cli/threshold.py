@@ -45,8 +45,14 @@ def threshold_cmd(
     from ema_cli.api.threshold import threshold
     from ema_cli.report.rundir import check_output
 
-    check_output(out, "threshold")
+    check_output(out, "threshold")  # a file, a folder of another command: refused at once
     pairs = parse_assignments(set_, "--set")
+    if out is not None:  # its inputs against the folder's, before the search
+        from ema_cli.api.threshold import threshold_inputs
+
+        check_output(out, "threshold", threshold_inputs(
+            config, vary, range_, metric=metric, limit=limit, require=require or (),
+            direction=direction, log=not linear, rtol=rtol, overrides=pairs))
     res = as_options(lambda: threshold(config, vary, range_, metric=metric, limit=limit,
                                        require=require or (), direction=direction,
                                        log=not linear, rtol=rtol, overrides=pairs),

@@ -50,13 +50,18 @@ def tune_cmd(
     if not config.is_file():
         raise EmaError(f"config '{config}' is not a file (a tuning config, e.g. "
                        "configs/tune.yaml)")
-    check_output(out, "tune")
+    pairs = parse_assignments(set_, "--set")
+    if out is not None:  # its inputs against the folder's, before the tuning
+        from ema_cli.api.tune import tune_inputs
+
+        check_output(out, "tune", as_options(
+            lambda: tune_inputs(config, pairs, method=method, runs=runs, budget=budget),
+            method="--method", runs="--runs", budget="--budget"))
     from ema_cli.progress import report
 
     def progress(run: int, done: int, total: int) -> None:
         report(f"run {run + 1}: evaluations", done, total)
 
-    pairs = parse_assignments(set_, "--set")
     res = as_options(lambda: tune(config, pairs, method=method, runs=runs, budget=budget,
                                   progress=progress,
                                   log=lambda text: err_console.print(text, highlight=False)),

@@ -10,7 +10,8 @@ import datetime as _dt
 import json
 import os
 import platform
-from collections.abc import Mapping
+import re
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,7 @@ from ema_cli import __version__
 from ema_cli.errors import EmaError
 from ema_cli.files import RESULTS_ROOT, atomic_write
 from ema_cli.hashing import content_hash, json_default
+from ema_cli.report.run_inputs import RunInputs, differences, legacy_inputs
 
 
 def write_text(path: Path, text: str) -> None:
@@ -105,15 +107,35 @@ def _read_head(git: Path) -> str | None:
 CACHE_NAME = ".cache"
 """A sweep's job cache inside its output folder (when that is outside results/)."""
 MARKER = ".ema-run.json"
-"""Written first into every output folder: which command made it, for which inputs, finished."""
+"""Written first into every output folder (:func:`prepare_output`): which command made it, its
+inputs (named components and their fingerprint, ``run_inputs``); rewritten last, atomically,
+with the files written and ``finished: true`` (:func:`finish_output`)."""
+
+NEW, RESUMED, FINISHED = "new", "resumed", "finished"
+"""The states of an output folder :func:`prepare_output` returns: created (or empty), an
+unfinished run of the same inputs to complete, the finished run of the same inputs (kept as it
+is: nothing is written into it)."""
+
+Inputs = RunInputs | str
+"""A run's inputs (``run_inputs.RunInputs``), or a bare fingerprint (no components to name)."""
 
 
-def _read_marker(folder: Path) -> dict[str, Any] | None:
+def _as_inputs(inputs: Inputs | None) -> RunInputs | None:
+    if inputs is None or isinstance(inputs, RunInputs):
+        return inputs
+    return legacy_inputs(str(inputs))
+
+
+def read_marker(folder: Path) -> dict[str, Any] | None:
+    """The marker of ``folder`` (None: none, or unreadable)."""
     try:
         data = json.loads((folder / MARKER).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
     return data if isinstance(data, dict) else None
+
+
+_read_marker = read_marker
 
 
 def _only_job_cache(path: Path) -> bool:
@@ -138,42 +160,58 @@ def _only_job_cache(path: Path) -> bool:
     return True
 
 
-def check_output(out: Path | None, command: str, fingerprint: str | None = None,
-                 resume: bool = False) -> bool:
-    """Check ``--out`` against the policy of :func:`prepare_output` without creating anything
-    (commands call it before a long computation) -> True if it is a run to resume."""
+_TEMPORARY = re.compile(r"\..+\.[0-9a-f]{12}\.tmp")
+"""The name of a temporary file of ``files.AtomicFile`` (``.<name>.<12 hex>.tmp``)."""
+
+
+def _busy(out: Path) -> bool:
+    """True if ``out`` holds anything but a job cache and temporaries a killed run left."""
+    try:
+        return any((p.name != CACHE_NAME or not _only_job_cache(p))
+                   and not (_TEMPORARY.fullmatch(p.name) and p.is_file())
+                   for p in out.iterdir())
+    except OSError as exc:
+        raise EmaError(f"--out '{out}' cannot be read: {exc.strerror}") from None
+
+
+def output_state(out: Path | None, command: str, inputs: Inputs | None = None) -> str:
+    """The state of ``--out`` for a run of ``command`` with ``inputs``, without creating
+    anything: :data:`NEW` (absent or empty), :data:`RESUMED` (an unfinished run of the same
+    command and inputs: it is completed) or :data:`FINISHED` (the finished run of the same
+    command and inputs: kept as it is). Anything else is refused (EmaError naming --out and,
+    for a run of other inputs, what differs). ``inputs`` None: only the command is checked
+    (the inputs are compared when the folder is prepared)."""
     if out is None:
-        return False
+        return NEW
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise EmaError(f"--out '{out}' is a file; expected a folder (new or empty)")
-    if out.is_dir():
-        try:  # a job cache (.cache) alone does not make a folder a result
-            busy = any(p.name != CACHE_NAME or not _only_job_cache(p) for p in out.iterdir())
-        except OSError as exc:
-            raise EmaError(f"--out '{out}' cannot be read: {exc.strerror}") from None
-        if busy:
-            mark = _read_marker(out)
-            same = (mark is not None and mark.get("command") == command
-                    and mark.get("fingerprint") == fingerprint)
-            if resume and same and not mark.get("finished"):
-                return True
-            if mark is None:
-                what = "other files"
-            elif mark.get("finished"):
-                what = f"a finished `ema {mark.get('command')}` run"
-            elif same:
-                what = f"an unfinished `ema {command}` run of the same inputs (it cannot resume)"
-            elif mark.get("command") != command:
-                what = f"an unfinished `ema {mark.get('command')}` run"
-            else:
-                what = f"an unfinished `ema {mark.get('command')}` run of other inputs"
-            raise EmaError(f"--out '{out}' already holds {what}; results are never overwritten: "
-                           "choose a new folder or delete that one")
+    if out.is_dir() and _busy(out):
+        mark = read_marker(out)
+        new = _as_inputs(inputs)
+        if mark is not None and mark.get("command") == command and (
+                new is None or mark.get("fingerprint") == new.fingerprint):
+            return FINISHED if mark.get("finished") is True else RESUMED
+        if mark is None:
+            what = "other files"
+        else:
+            state = "finished" if mark.get("finished") is True else "unfinished"
+            article = "an" if state == "unfinished" else "a"
+            what = f"{article} {state} `ema {mark.get('command')}` run"
+            if mark.get("command") == command and new is not None:
+                what += (" of other inputs ("
+                         + differences(mark.get("inputs"), new, mark.get("sets") or ()) + ")")
+        raise EmaError(f"--out '{out}' already holds {what}; results are never overwritten: "
+                       "choose a new folder or delete that one")
     parent = next((p for p in out.absolute().parents if p.exists()), None)
     if parent is not None and not parent.is_dir():
         raise EmaError(f"--out '{out}': '{parent}' is a file, not a folder")
-    return False
+    return NEW
+
+
+def check_output(out: Path | None, command: str, inputs: Inputs | None = None) -> str:
+    """Check ``--out`` before a long computation (:func:`output_state`) -> its state."""
+    return output_state(out, command, inputs)
 
 
 LATEST = "latest"
@@ -183,8 +221,6 @@ LATEST = "latest"
 def default_folder(command: str, name: str) -> Path:
     """``results/<command>/<config-name>/``: where the default run folders of a command and a
     config go (``name`` made safe for a folder name)."""
-    import re
-
     safe = re.sub(r"[^A-Za-z0-9._-]+", "-", str(name)).strip(".-") or "default"
     return RESULTS_ROOT / command / safe
 
@@ -197,7 +233,7 @@ def _unfinished(parent: Path, command: str, fingerprint: str) -> Path | None:
     for p in parent.iterdir():
         if p.is_symlink() or not p.is_dir() or f"_{fingerprint[:8]}" not in p.name:
             continue
-        mark = _read_marker(p)
+        mark = read_marker(p)
         if (mark is not None and mark.get("command") == command
                 and mark.get("fingerprint") == fingerprint and not mark.get("finished")):
             found.append(p)
@@ -223,24 +259,49 @@ def point_latest(folder: Path) -> None:
             tmp.unlink()
 
 
-def prepare_output(command: str, name: str, fingerprint: str, out: Path | None = None,
-                   resume: bool = False) -> tuple[Path, bool]:
-    """The one output-folder policy of every command -> (folder, resumed).
+def remove_stale_temporaries(folder: Path) -> None:
+    """Delete the temporary files (``.<name>.<12 hex>.tmp``, ``files.AtomicFile``) a killed
+    run left anywhere in ``folder`` (its job cache aside): the folder is being resumed, no
+    other process writes there."""
+    import contextlib
+
+    for dirpath, dirnames, filenames in os.walk(folder):
+        dirnames[:] = [d for d in dirnames if d != CACHE_NAME]
+        for name in filenames:
+            p = Path(dirpath) / name
+            if _TEMPORARY.fullmatch(name) and not p.is_symlink():
+                with contextlib.suppress(OSError):
+                    p.unlink()
+
+
+def prepare_output(command: str, name: str, inputs: Inputs, out: Path | None = None
+                   ) -> tuple[Path, str]:
+    """The one output-folder policy of every command -> (folder, state).
 
     ``out`` None: a new folder ``results/<command>/<name>/<stamp>_<hash>/`` (``name``: the
-    config's name), and ``results/<command>/<name>/latest`` points at it; with ``resume``, an
-    unfinished run of the same inputs there is continued instead. A given ``out`` must be new
-    or empty: earlier results are never overwritten. The one exception, when ``resume`` is
-    set, is an unfinished run of the same ``command`` with the same ``fingerprint`` (the hash of
-    its resolved inputs), which is continued. Errors name ``--out`` and what was expected.
+    config's name), and ``results/<command>/<name>/latest`` points at it; the newest unfinished
+    run of the same inputs there, if any, is completed instead. A given ``out`` must be new or
+    empty (:data:`NEW`: the marker is written first, ``finished: false``), or hold a run of the
+    same ``command`` and ``inputs`` (``run_inputs.RunInputs``: the fingerprint of its named
+    components): unfinished, it is completed (:data:`RESUMED`; the caller writes its files
+    again, each atomically); finished, it is kept as it is (:data:`FINISHED`; the caller
+    writes nothing). Earlier results of other inputs are never overwritten: errors name
+    ``--out`` and what differs.
     """
+    from ema_cli.progress import announce
+
+    run = _as_inputs(inputs)
+    assert run is not None
+    fingerprint = run.fingerprint
     default = out is None
     if out is None:
         parent = default_folder(command, name)
-        earlier = _unfinished(parent, command, fingerprint) if resume else None
+        earlier = _unfinished(parent, command, fingerprint)
         if earlier is not None:
+            remove_stale_temporaries(earlier)
             point_latest(earlier)
-            return earlier, True
+            announce(f"completing the unfinished run of the same inputs in {earlier}")
+            return earlier, RESUMED
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
         out = parent / f"{stamp}_{fingerprint[:8]}"
         k = 1
@@ -249,33 +310,72 @@ def prepare_output(command: str, name: str, fingerprint: str, out: Path | None =
             out = base.with_name(f"{base.name}-{k}")
             k += 1
     out = Path(out)
-    if check_output(out, command, fingerprint, resume):
-        return out, True
+    state = output_state(out, command, run)
+    if state == FINISHED:
+        announce(f"--out '{out}' holds the finished run of these inputs: kept as it is")
+        return out, state
+    if state == RESUMED:
+        remove_stale_temporaries(out)
+        announce(f"completing the unfinished run of the same inputs in {out}")
+        return out, state
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise EmaError(f"--out '{out}': cannot create the folder ({exc.strerror})") from None
     if not os.access(out, os.W_OK):
         raise EmaError(f"--out '{out}': the folder is not writable")
+    remove_stale_temporaries(out)
     write_json(out / MARKER, {"command": command, "fingerprint": fingerprint,
                               "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-                              "finished": False})
+                              "finished": False, "inputs": run.components,
+                              "sets": list(run.sets)})
     if default:
         point_latest(out)
-    return out, False
+    return out, NEW
+
+
+def _outputs(folder: Path) -> dict[str, int]:
+    """Every file in ``folder`` (its marker, job cache and temporaries aside) -> its size."""
+    found = {}
+    for dirpath, dirnames, filenames in os.walk(folder):
+        dirnames[:] = sorted(d for d in dirnames if d != CACHE_NAME)
+        for name in sorted(filenames):
+            if name == MARKER or _TEMPORARY.fullmatch(name):
+                continue
+            p = Path(dirpath) / name
+            try:
+                found[p.relative_to(folder).as_posix()] = p.stat().st_size
+            except OSError:
+                continue
+    return found
 
 
 def finish_output(folder: Path) -> None:
-    """Mark ``folder`` finished: :func:`prepare_output` will never resume into it."""
-    mark = _read_marker(folder) or {}
+    """Mark ``folder`` finished, last and atomically: the marker rewritten with the files
+    written (``outputs``: path -> bytes) and ``finished: true``. A finished folder is kept as
+    it is by a run of the same inputs, refused by any other."""
+    mark = read_marker(folder) or {}
+    mark["outputs"] = _outputs(folder)
     mark["finished"] = True
     write_json(folder / MARKER, mark)
 
 
+def write_run(command: str, name: str, inputs: Inputs, folder: Path | None,
+              write: Callable[[Path], None]) -> Path:
+    """A command's whole folder: :func:`prepare_output`, ``write(folder)`` (every file, each
+    atomically; not called when the folder holds the finished run of these inputs), then
+    :func:`finish_output` -> the folder."""
+    out, state = prepare_output(command, name, inputs, folder)
+    if state != FINISHED:
+        write(out)
+        finish_output(out)
+    return out
+
+
 def new_run_dir(name: str, data_for_hash: Any, out: Path | None = None,
                 command: str | None = None) -> Path:
-    """A new output folder for a run that cannot be resumed: :func:`prepare_output` with the
-    content hash of ``data_for_hash`` as fingerprint."""
+    """An output folder (:func:`prepare_output`) with the content hash of ``data_for_hash``
+    as its fingerprint."""
     folder, _ = prepare_output(command or name, name, content_hash(data_for_hash, 16), out)
     return folder
 

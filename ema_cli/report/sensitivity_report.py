@@ -33,10 +33,11 @@ from matplotlib.figure import Figure
 
 from ema_cli.config.base import check_plain_name
 from ema_cli.config.sensitivity import SensitivityConfig
-from ema_cli.hashing import content_hash
 from ema_cli.report.figures import subplots
 from ema_cli.report.markdown import md_cell
+from ema_cli.report.run_inputs import RunInputs, run_inputs
 from ema_cli.report.rundir import (
+    FINISHED,
     finish_output,
     manifest,
     prepare_output,
@@ -54,10 +55,12 @@ NEGLIGIBLE_ST = 0.02  # a factor with ST below this is listed as without influen
 CSV_FORMAT = "%.9g"
 
 
-def fingerprint(cfg: SensitivityConfig, method: str, n: int) -> str:
-    """The study's identity for resuming: its config (parallel settings aside), method and n."""
-    return content_hash({"cfg": cfg.model_dump(mode="json", exclude={"parallel"}),
-                         "method": method, "n": n}, 16)
+def fingerprint(cfg: SensitivityConfig, method: str, n: int,
+                overrides: Sequence[tuple[str, Any]] = ()) -> RunInputs:
+    """The study's inputs, its identity for resuming (``report.run_inputs.RunInputs``): every
+    leaf of its config (parallel settings aside), the method and n."""
+    doc = cfg.model_dump(mode="json", by_alias=True, exclude={"parallel"})
+    return run_inputs(doc, sets=overrides, options={"method": method, "n": n})
 
 
 def _metric_name(metric: str, transform: str) -> str:
@@ -244,17 +247,20 @@ def write_outputs(res: SensitivityResult, overrides: Sequence[tuple[str, Any]] =
 
 def prepare_folder(res: SensitivityResult, out: Path | None,
                    overrides: Sequence[tuple[str, Any]]) -> Path:
-    """Create (or resume) the output folder before any simulation runs."""
-    folder, _ = prepare_output(COMMAND, res.cfg.name, fingerprint(res.cfg, res.method, res.n),
-                               out, resume=True)
+    """Create (or resume) the output folder before any simulation runs (the finished study of
+    the same inputs: kept as it is, nothing written)."""
+    folder, state = prepare_output(COMMAND, res.cfg.name,
+                                   fingerprint(res.cfg, res.method, res.n, overrides), out)
     res.folder = folder
+    if state == FINISHED:
+        return folder
     write_text(folder / "config.resolved.yaml",
                yaml.safe_dump(res.cfg.model_dump(mode="json"), sort_keys=False))
     write_manifest(res, overrides, status="running")
     return folder
 
 
-def finished_study(folder: Path, fp: str) -> bool:
+def finished_study(folder: Path, fp: RunInputs) -> bool:
     """True if ``folder`` holds the finished ``ema sensitivity`` study with fingerprint ``fp``."""
     import json
 
@@ -265,7 +271,7 @@ def finished_study(folder: Path, fp: str) -> bool:
     except (OSError, ValueError):
         return False
     return (isinstance(mark, dict) and mark.get("command") == COMMAND
-            and mark.get("fingerprint") == fp and mark.get("finished") is True)
+            and mark.get("fingerprint") == fp.fingerprint and mark.get("finished") is True)
 
 
 def save_sensitivity(res: SensitivityResult, out: Path | None = None,
@@ -274,6 +280,8 @@ def save_sensitivity(res: SensitivityResult, out: Path | None = None,
     Python API's ``Sensitivity.save``) -> the folder."""
     prepare_folder(res, out, overrides)
     assert res.folder is not None
+    if finished_study(res.folder, fingerprint(res.cfg, res.method, res.n, overrides)):
+        return res.folder  # the finished study of the same inputs: kept as it is
     write_outputs(res, overrides)
     if res.complete:
         finish_output(res.folder)

@@ -83,9 +83,13 @@ def sweep_figures(result: SweepResult, kinds: Sequence[str] | None = None
     return list(_figures(result, kinds))
 
 
-def write_figures(result: SweepResult, folder: Path) -> list[Path]:
+def write_figures(result: SweepResult, folder: Path, stop: Any = None) -> list[Path]:
+    """Draw and write the sweep's figures into ``folder`` -> their paths; ``stop``: a
+    ``threading.Event`` that ends the drawing before the next figure once set."""
     paths = []
     for name, fig in _figures(result):  # one at a time: each is closed once written
+        if stop is not None and stop.is_set():
+            break
         path = folder / f"{name}.png"
         write_figure(path, fig)
         paths.append(path)

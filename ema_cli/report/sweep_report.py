@@ -24,7 +24,6 @@ them), ``sweep_summary`` (summary.md).
 
 from __future__ import annotations
 
-import contextlib
 import json
 import time
 from collections.abc import Sequence
@@ -42,10 +41,12 @@ from ema_cli.report.rundir import (
     finish_output,
     manifest,
     prepare_output,
+    remove_stale_temporaries,
     write_csv,
     write_json,
     write_text,
 )
+from ema_cli.report.rundir import FINISHED as KEPT  # the folder holds the finished run
 from ema_cli.report.sweep_parquet import SIGNALS_FILE, SignalsWriter
 from ema_cli.report.sweep_plots import sweep_figures, write_figures
 from ema_cli.report.sweep_summary import summary_markdown
@@ -57,8 +58,10 @@ if TYPE_CHECKING:
     from ema_cli.sweep.plan import Plan
 
 __all__ = ["SIGNALS_FILE", "BackgroundFigures", "SweepFolder", "default_cache_dir",
-           "finish_sweep", "finished_sweep", "metric_label", "prepare_folder", "save_sweep",
-           "sweep_figures", "write_manifest", "write_outputs"]
+           "finish_sweep", "finished_sweep", "metric_label", "prepare_folder",
+           "remove_stale_temporaries", "save_sweep", "stop_drawing", "sweep_figures",
+           "sweep_inputs",
+           "write_manifest", "write_outputs"]
 
 
 def default_cache_dir(out: Path | None) -> Path:
@@ -112,7 +115,10 @@ class SweepFolder:
         if self.reuse_finished and out is not None and finished_sweep(Path(out), plan):
             self.folder, self.reused = Path(out), True
             return
-        self.folder = prepare_folder(plan, out, self.overrides)
+        self.folder, state = prepare_folder(plan, out, self.overrides)
+        if state == KEPT:  # the finished run of this sweep: read, never rewritten
+            self.reused = True
+            return
         if plan.cfg.outputs.timeseries and plan.dec > 0:
             self.writer = SignalsWriter(self.folder / SIGNALS_FILE, plan)
 
@@ -173,21 +179,40 @@ class BackgroundFigures:
         self.paths: list[Path] = []
         self.error: BaseException | None = None
         self.seconds = 0.0
+        self.stop = threading.Event()
+        self.done = threading.Event()  # set by the thread as it ends (``Thread.join`` once
+        # interrupted by a signal may return while the thread still runs)
         self.thread = threading.Thread(target=self._run, name="ema-figures", daemon=True)
+        _DRAWING.add(self)  # before it starts: an interrupt at any instant can stop it
         self.thread.start()
 
     def _run(self) -> None:
         t0 = time.perf_counter()
         try:
             assert self.result.folder is not None
-            self.paths = write_figures(self.result, self.result.folder / "figures")
+            self.paths = write_figures(self.result, self.result.folder / "figures", self.stop)
         except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
             self.error = exc
-        self.seconds = time.perf_counter() - t0
+        finally:
+            self.seconds = time.perf_counter() - t0
+            self.done.set()
+
+    def cancel(self) -> None:
+        """Stop drawing after the figure being written (it is written whole) and wait for the
+        thread: an interrupted command leaves no half-written file behind (and no thread in
+        native code when the process exits). The folder stays unfinished (the same command
+        completes it)."""
+        self.stop.set()
+        t0 = time.perf_counter()
+        while not self.done.wait(0.05):
+            if self.thread.ident is None and time.perf_counter() - t0 > 1.0:
+                break  # never started (interrupted in Thread.start)
+        _DRAWING.discard(self)
 
     def join(self) -> None:
         """Wait for the figures, then write the manifest and mark the folder finished."""
-        self.thread.join()
+        self.done.wait()
+        _DRAWING.discard(self)
         result = self.result
         result.figures = self.paths
         result.timings["figures"] = self.seconds
@@ -204,13 +229,24 @@ class BackgroundFigures:
         finish_if_complete(result)
 
 
+_DRAWING: set[BackgroundFigures] = set()
+"""The figure threads of this process still drawing (:func:`stop_drawing`)."""
+
+
+def stop_drawing() -> None:
+    """Stop every figure thread still drawing, after the figure it writes (an interrupted
+    command: its folder is left unfinished, every file in it whole)."""
+    for pending in list(_DRAWING):
+        pending.cancel()
+
+
 def finish_sweep(result: SweepResult) -> None:
     """Wait for figures drawn in the background (``SweepFolder(figures="background")``), write
     the final manifest and mark the folder finished; nothing to do otherwise."""
     pending = getattr(result, "pending", None)
     if pending is not None:
+        pending.join()  # interrupted here, it stays pending: cancel_sweep stops the thread
         result.pending = None
-        pending.join()
 
 
 def save_sweep(result: SweepResult, out: Path | None = None,
@@ -219,7 +255,10 @@ def save_sweep(result: SweepResult, out: Path | None = None,
     API's ``Sweep.save``) -> the folder; ``out`` None: a new one under ``results/sweep/<name>/``."""
     t0 = time.perf_counter()
     plan = result.plan
-    folder = result.folder = prepare_folder(plan, out, overrides)
+    folder, state = prepare_folder(plan, out, overrides)
+    result.folder = folder
+    if state == KEPT:  # the finished run of this sweep: kept as it is
+        return folder
     if plan.cfg.outputs.timeseries and plan.dec > 0:
         writer = SignalsWriter(folder / SIGNALS_FILE, plan)
         try:
@@ -238,7 +277,7 @@ def save_sweep(result: SweepResult, out: Path | None = None,
 
 
 def finish_if_complete(result: SweepResult) -> None:
-    """Mark the folder finished (``rundir.finish_output``: never resumed nor rewritten) once
+    """Mark the folder finished (``rundir.finish_output``: kept as it is, never rewritten) once
     every job finished: none pending, none failed, not interrupted."""
     counts = result.counts()
     if (result.folder is not None and not result.interrupted and not counts["pending"]
@@ -246,52 +285,47 @@ def finish_if_complete(result: SweepResult) -> None:
         finish_output(result.folder)
 
 
+def sweep_inputs(plan: Plan, overrides: Sequence[tuple[str, Any]] = ()) -> Any:
+    """The inputs (``report.run_inputs.RunInputs``) the marker of a sweep's folder records:
+    every leaf of the resolved config (its parallel settings aside), and the sweep's key (its
+    ordered job keys: the simulator's source and the files the config refers to)."""
+    from ema_cli.report.run_inputs import run_inputs
+
+    cfg = plan.cfg.model_dump(mode="json", by_alias=True, exclude={"parallel"})
+    return run_inputs(cfg, sets=overrides).with_components(**{"sweep jobs (key)": plan.key})
+
+
 def finished_sweep(folder: Path, plan: Plan) -> bool:
-    """True if ``folder`` holds the finished ``ema sweep`` run of ``plan`` (same sweep key)."""
+    """True if ``folder`` holds the finished ``ema sweep`` run of ``plan`` (same inputs)."""
     try:
         mark = json.loads((folder / MARKER).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
     return (isinstance(mark, dict) and mark.get("command") == "sweep"
-            and mark.get("fingerprint") == plan.key and mark.get("finished") is True)
+            and mark.get("fingerprint") == sweep_inputs(plan).fingerprint
+            and mark.get("finished") is True)
 
 
-def remove_stale_temporaries(folder: Path) -> None:
-    """Delete the temporary files (``.<name>.<12 hex>.tmp``, ``files.AtomicFile``) an earlier,
-    killed run left in ``folder`` and its figures/ and timeseries/ (resuming it: no other
-    process writes there)."""
-    import re
-
-    ours = re.compile(r"\..+\.[0-9a-f]{12}\.tmp")
-    for sub in (folder, folder / "figures", folder / "timeseries"):
-        try:
-            entries = list(sub.iterdir())
-        except OSError:
-            continue
-        for p in entries:
-            if ours.fullmatch(p.name) and p.is_file() and not p.is_symlink():
-                with contextlib.suppress(OSError):
-                    p.unlink()
-
-
-def prepare_folder(plan: Plan, out: Path | None, overrides: Sequence[tuple[str, Any]]) -> Path:
-    """Create the output folder before any job runs (so a bad ``--out`` loses nothing).
+def prepare_folder(plan: Plan, out: Path | None, overrides: Sequence[tuple[str, Any]]
+                   ) -> tuple[Path, str]:
+    """Create the output folder before any job runs (so a bad ``--out`` loses nothing) ->
+    (folder, state: ``rundir.NEW``, ``RESUMED`` or ``FINISHED``).
 
     The one ``--out`` policy (``rundir.prepare_output``): a new or empty folder, or an earlier
-    unfinished run of the same sweep (same ``plan.key``), which is resumed in place (the
-    temporary files a killed run left there are deleted first). A sweep whose every job
-    finished is marked finished: it is never rewritten. Anything else is refused, never
+    unfinished run of the same sweep (same inputs, :func:`sweep_inputs`), which is resumed in
+    place (the temporary files a killed run left there are deleted first), or the finished run
+    of the same sweep, kept as it is (nothing is written). Anything else is refused, never
     overwritten.
     """
-    folder, resumed = prepare_output("sweep", plan.cfg.name, plan.key, out, resume=True)
-    if resumed:
-        remove_stale_temporaries(folder)
+    folder, state = prepare_output("sweep", plan.cfg.name, sweep_inputs(plan, overrides), out)
+    if state == KEPT:
+        return folder, state
     write_text(folder / "config.resolved.yaml",
                yaml.safe_dump(plan.cfg.model_dump(mode="json"), sort_keys=False))
     write_json(folder / "manifest.json", {  # provisional: identifies the sweep for a resume
         "command": "sweep", "name": plan.cfg.name, "sweep_key": plan.key, "status": "running",
         "n_jobs": len(plan.jobs), "overrides": [list(o) for o in overrides]})
-    return folder
+    return folder, state
 
 
 def write_manifest(result: SweepResult, overrides: Sequence[tuple[str, Any]],

@@ -35,8 +35,13 @@ def test_a_passing_battery_writes_everything(tmp_path):
     assert "**PASS**" in md and md.count("| PASS |") == len(table)
     man = json.loads((out / "manifest.json").read_text())
     assert man["passed"] is True and set(man["test_wall_s"]) == set(table.test)
-    # a finished run is never overwritten
+    # a finished run is never overwritten: the same inputs keep it, others are refused
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*")}
     r2 = runner.invoke(app, ["acceptance", SPEC, *QUICK, "--out", str(out)])
+    assert r2.exit_code == 0, r2.output
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before
+    r2 = runner.invoke(app, ["acceptance", SPEC, *QUICK, "--set", "actuator.plant.kL=600",
+                             "--out", str(out)])
     assert r2.exit_code == 2 and "never overwritten" in r2.output
 
 

@@ -82,16 +82,39 @@ def test_out_holding_other_files_is_never_overwritten(tmp_path, cmd):
     assert (tmp_path / "mine.csv").read_text() == "precious"
 
 
-@pytest.mark.parametrize("cmd", ["simulate", "threshold", "identify", "margins", "freqresp",
-                                 "acceptance", "sensitivity"])
-def test_a_finished_run_is_not_overwritten(tmp_path, cmd):
+OTHER_INPUT = {  # one input changed, and how the refusal names it
+    "simulate": (["--set", "plant.kL=600"], "--set plant.kL"),
+    "threshold": (["--set", "plant.kL=600"], "--set plant.kL"),
+    "identify": (["--seed", "3"], "seed 0 there, 3 here"),
+    "margins": (["--set", "plant.kL=600"], "--set plant.kL"),
+    "freqresp": (["--set", "plant.kL=600"], "--set plant.kL"),
+    "acceptance": (["--set", "actuator.plant.kL=600"], "--set actuator.plant.kL"),
+    "sensitivity": (["--set", "seed=5"], "--set seed"),
+}
+
+
+def _files(folder: Path) -> dict[str, int]:
+    return {str(p.relative_to(folder)): p.stat().st_mtime_ns for p in folder.rglob("*")}
+
+
+@pytest.mark.parametrize("cmd", sorted(OTHER_INPUT))
+def test_a_finished_run_is_kept_and_one_of_other_inputs_refused(tmp_path, cmd):
+    """The same command again: exit 0, the finished folder kept as it is (nothing rewritten);
+    other inputs: refused in one line naming what differs, nothing touched."""
+    import json
+
     out = tmp_path / "run"
     r = invoke(*WRITERS[cmd], "--out", str(out))
     assert r.exit_code == 0, r.output
-    before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
-    one_clear_line(invoke(*WRITERS[cmd], "--out", str(out)), "--out", "finished",
-                   "never overwritten")
-    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
+    before = _files(out)
+    r = invoke(*WRITERS[cmd], "--out", str(out))
+    assert r.exit_code == 0, r.output
+    assert _files(out) == before
+    assert json.loads((out / ".ema-run.json").read_text())["finished"] is True
+    extra, needle = OTHER_INPUT[cmd]
+    one_clear_line(invoke(*WRITERS[cmd], *extra, "--out", str(out)), "--out", "finished",
+                   "of other inputs", needle, "never overwritten")
+    assert _files(out) == before
 
 
 def test_nothing_is_written_outside_the_output_folder(tmp_path, monkeypatch):

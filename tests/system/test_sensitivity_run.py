@@ -75,9 +75,14 @@ def test_sobol_writes_everything(tmp_path):
     assert man["status"] == "complete" and man["runs_total"] == 160
     assert man["computed"] == 160 and man["method"] == "sobol" and man["n"] == 16
     assert "gap1" in (out / "summary.md").read_text()
-    # a finished study is never rewritten
+    # a finished study is never rewritten: the same inputs keep it, others are refused
+    before = {p: p.stat().st_mtime_ns for p in out.iterdir() if p.is_file()}
     r = runner.invoke(app, ["sensitivity", str(cfg_path), "--out", str(out), "--no-progress"])
-    assert r.exit_code == 2 and "finished `ema sensitivity` run" in r.output
+    assert r.exit_code == 0, r.output
+    assert {p: p.stat().st_mtime_ns for p in out.iterdir() if p.is_file()} == before
+    r = runner.invoke(app, ["sensitivity", str(cfg_path), "--out", str(out), "--no-progress",
+                            "--n", "8"])
+    assert r.exit_code == 2 and "finished `ema sensitivity` run of other inputs" in r.output
 
 
 def test_each_sample_is_the_simulation_of_its_factor_values(tmp_path):

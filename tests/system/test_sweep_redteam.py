@@ -60,33 +60,42 @@ def mtimes(folder: Path) -> dict[str, int]:
             for p in folder.rglob("*") if p.is_file()}
 
 
+def outputs(folder: Path) -> dict[str, int]:
+    """:func:`mtimes` of the outputs (the job cache in .cache aside: reading it may touch
+    its journal)."""
+    return {k: v for k, v in mtimes(folder).items() if not k.startswith(".cache")}
+
+
 # ------------------------------------------------------------ 1, 2: finished runs are final
 
 
-def test_sweep_twice_into_one_out_is_refused_and_touches_nothing(tmp_path):
+def test_sweep_twice_into_one_out_keeps_it_and_other_inputs_touch_nothing(tmp_path):
     cfg, out = study(tmp_path), tmp_path / "out"
     r = sweep_cli(cfg, out)
     assert r.exit_code == 0, r.output
     assert json.loads((out / ".ema-run.json").read_text())["finished"] is True
-    before = mtimes(out)
-    one_line(sweep_cli(cfg, out), "--out", "already holds a finished `ema sweep` run",
-             "never overwritten")
-    assert mtimes(out) == before
-    # another sweep: the same refusal (not 'unfinished ... of other inputs')
+    before = outputs(out)
+    r = sweep_cli(cfg, out)  # the same sweep: its finished folder is read, kept as it is
+    assert r.exit_code == 0, r.output
+    assert outputs(out) == before
+    # another sweep: refused, naming what differs (not 'unfinished')
     other = study(tmp_path, "other.yaml", name="other")
-    text = one_line(sweep_cli(other, out), "a finished `ema sweep` run")
+    text = one_line(sweep_cli(other, out), "a finished `ema sweep` run of other inputs",
+                    "name rt there, other here", "never overwritten")
     assert "unfinished" not in text
-    assert mtimes(out) == before
+    assert outputs(out) == before
 
 
-def test_api_save_twice_is_refused(tmp_path):
+def test_api_save_twice_keeps_the_folder_and_another_sweep_is_refused(tmp_path):
     from ema_cli import api
 
     sw = api.sweep(study(tmp_path), n_jobs=1, progress=False)
     folder = sw.save(tmp_path / "saved")
     before = mtimes(folder)
-    with pytest.raises(EmaError, match="finished `ema sweep` run"):
-        sw.save(folder)
+    assert sw.save(folder) == folder
+    other = api.sweep(study(tmp_path, "other.yaml", name="other"), n_jobs=1, progress=False)
+    with pytest.raises(EmaError, match="finished `ema sweep` run of other inputs"):
+        other.save(folder)
     assert mtimes(folder) == before
 
 
@@ -152,9 +161,14 @@ def test_reproduce_resumed_after_the_first_study_keeps_it(tmp_path, monkeypatch)
     assert pd.read_csv(out / "claims.csv")["result"].tolist() == ["PASS"]
     assert (out / "figA.png").is_file() and (out / "figB.png").is_file()
     assert len(pd.read_csv(out / "tables" / "figA_metrics.csv")) == 3
-    # the finished reproduction is final
+    # the finished reproduction is final: the same batch keeps it, another is refused
+    before = outputs(out)
     r = runner.invoke(app, ["reproduce", str(exp), "--out", str(out), "--n-jobs", "1"])
-    one_line(r, "finished `ema reproduce` run")
+    assert r.exit_code == 0, r.output
+    assert outputs(out) == before
+    r = runner.invoke(app, ["reproduce", str(exp), "--out", str(out), "--n-jobs", "1",
+                            "--set", "name=other"])
+    one_line(r, "finished `ema reproduce` run of other inputs", "--set name")
 
 
 # ------------------------------------------------------------ 3: .cache with user files

@@ -80,8 +80,9 @@ def test_simulate_plot_and_save(tmp_path):
     ts = pd.read_csv(folder / "timeseries.csv")
     np.testing.assert_allclose(ts["theta_load_deg"], run.signal("theta_load_deg"),
                                rtol=1e-8, atol=1e-12)
-    with pytest.raises(EmaError, match="never overwritten"):
-        run.save(folder)
+    assert run.save(folder) == folder  # the same run: kept as it is
+    with pytest.raises(EmaError, match="other inputs.*never overwritten"):
+        api.simulate(SHORT, step_deg=3.0).save(folder)
 
 
 def test_config_sources_are_equivalent(tmp_path):

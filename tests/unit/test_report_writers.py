@@ -146,11 +146,16 @@ def test_new_run_dir_naming_and_no_overwrite(tmp_path, monkeypatch):
     assert first == tmp_path / "results" / "simulate" / "s1" / f"20240517-130405_{digest[:8]}"
     assert [p.name for p in first.iterdir()] == [rundir.MARKER]  # only the marker
     assert _marker(first) == {"command": "simulate", "fingerprint": digest[:16],
-                              "created": "2024-05-17T13:04:05+00:00", "finished": False}
+                              "created": "2024-05-17T13:04:05+00:00", "finished": False,
+                              "inputs": {"fingerprint": digest[:16]}, "sets": []}
     latest = first.parent / rundir.LATEST
     assert latest.is_symlink() and os.readlink(latest) == first.name  # relative
-    # the same second and data: a numbered sibling, never the same folder
+    # the same data, unfinished: completed in place; finished, the same second: a numbered
+    # sibling, never the same folder
+    assert new_run_dir("s1", data, command="simulate") == first
+    rundir.finish_output(first)
     second = new_run_dir("s1", data, command="simulate")
+    rundir.finish_output(second)
     third = new_run_dir("s1", data, command="simulate")
     assert second.name == f"20240517-130405_{digest[:8]}-1" and third.name.endswith("-2")
     assert len({first, second, third}) == 3 and all(p.is_dir() for p in (second, third))
@@ -167,18 +172,16 @@ def test_new_run_dir_naming_and_no_overwrite(tmp_path, monkeypatch):
 def test_default_folder_resumes_unfinished_run_of_same_inputs(tmp_path, monkeypatch):
     monkeypatch.setattr(rundir, "RESULTS_ROOT", tmp_path / "results")
     fp = "0123456789abcdef"
-    a, resumed = rundir.prepare_output("sweep", "my study", fp, resume=True)
-    assert not resumed and a.parent == tmp_path / "results" / "sweep" / "my-study"
-    b, resumed = rundir.prepare_output("sweep", "my study", fp, resume=True)
-    assert resumed and b == a  # unfinished, same inputs: the same folder
-    c, resumed = rundir.prepare_output("sweep", "my study", "f" * 16, resume=True)
-    assert not resumed and c != a  # other inputs: a new folder
+    a, state = rundir.prepare_output("sweep", "my study", fp)
+    assert state == rundir.NEW and a.parent == tmp_path / "results" / "sweep" / "my-study"
+    b, state = rundir.prepare_output("sweep", "my study", fp)
+    assert state == rundir.RESUMED and b == a  # unfinished, same inputs: the same folder
+    c, state = rundir.prepare_output("sweep", "my study", "f" * 16)
+    assert state == rundir.NEW and c != a  # other inputs: a new folder
     rundir.finish_output(a)
-    d, resumed = rundir.prepare_output("sweep", "my study", fp, resume=True)
-    assert not resumed and d not in (a, c)  # finished: never resumed nor rewritten
-    e, resumed = rundir.prepare_output("sweep", "my study", fp)  # no resume asked
-    assert not resumed and e not in (a, c, d)
-    assert (a.parent / rundir.LATEST).resolve() == e.resolve()
+    d, state = rundir.prepare_output("sweep", "my study", fp)
+    assert state == rundir.NEW and d not in (a, c)  # finished: a new run gets a new folder
+    assert (a.parent / rundir.LATEST).resolve() == d.resolve()
     # a real folder named latest is never replaced
     f, _ = rundir.prepare_output("simulate", "x", fp)
     (f.parent / rundir.LATEST).unlink()
@@ -193,9 +196,11 @@ def test_new_run_dir_given_out(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert new_run_dir("x", {}, empty) == empty  # an existing empty folder is fine
-    # a folder holding anything is refused, even the same run: never overwritten
-    with pytest.raises(EmaError, match=r"--out '.*b' already holds an unfinished `ema x` run"):
-        new_run_dir("x", {}, out)
+    # the same inputs, unfinished: completed in place; other inputs: refused
+    assert new_run_dir("x", {}, out) == out
+    with pytest.raises(EmaError, match=r"--out '.*b' already holds an unfinished `ema x` run "
+                                       r"of other inputs"):
+        new_run_dir("x", {"seed": 1}, out)
     other = tmp_path / "other"
     other.mkdir()
     (other / "keep.txt").write_text("x")
@@ -214,19 +219,21 @@ def test_new_run_dir_refuses_a_file(tmp_path):
 
 def test_prepare_output_resume_and_finish(tmp_path):
     out = tmp_path / "run"
-    assert rundir.prepare_output("sweep", "s", "f" * 16, out) == (out, False)
-    # the same command and fingerprint, unfinished: resumed only when asked
-    assert rundir.prepare_output("sweep", "s", "f" * 16, out, resume=True) == (out, True)
-    with pytest.raises(EmaError, match="already holds"):
-        rundir.prepare_output("sweep", "s", "f" * 16, out)
+    assert rundir.prepare_output("sweep", "s", "f" * 16, out) == (out, rundir.NEW)
+    # the same command and inputs, unfinished: completed in place
+    assert rundir.prepare_output("sweep", "s", "f" * 16, out) == (out, rundir.RESUMED)
     with pytest.raises(EmaError, match=r"an unfinished `ema sweep` run of other inputs"):
-        rundir.prepare_output("sweep", "s", "e" * 16, out, resume=True)
-    with pytest.raises(EmaError, match="already holds"):
-        rundir.prepare_output("threshold", "s", "f" * 16, out, resume=True)
+        rundir.prepare_output("sweep", "s", "e" * 16, out)
+    with pytest.raises(EmaError, match=r"already holds an unfinished `ema sweep` run;"):
+        rundir.prepare_output("threshold", "s", "f" * 16, out)
+    (out / "a.csv").write_text("x\n")
     rundir.finish_output(out)
-    assert _marker(out)["finished"] is True
-    with pytest.raises(EmaError, match=r"already holds a finished `ema sweep` run"):
-        rundir.prepare_output("sweep", "s", "f" * 16, out, resume=True)
+    mark = _marker(out)
+    assert mark["finished"] is True and mark["outputs"] == {"a.csv": 2}
+    # finished, the same inputs: kept as it is (the caller writes nothing)
+    assert rundir.prepare_output("sweep", "s", "f" * 16, out) == (out, rundir.FINISHED)
+    with pytest.raises(EmaError, match=r"already holds a finished `ema sweep` run of other"):
+        rundir.prepare_output("sweep", "s", "e" * 16, out)
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root can write to read-only folders")
