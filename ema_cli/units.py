@@ -109,3 +109,100 @@ def fmt_num(value: float | int | str | None, unit: str = "", digits: int = 4, *,
     else:
         text = f"{v:.{digits}g}"
     return f"{text} {unit}" if unit and unit != "-" else text
+
+
+# ---- quantities of an actuator description (config section `actuator`) ---------------------
+ROTARY, TRANSLATIONAL = "rotary", "translational"
+AXES = (ROTARY, TRANSLATIONAL)
+QUANTITY_UNITS: dict[str, dict[str, tuple[float, str]]] = {
+    "position": {"rad": (1.0, ROTARY), "mrad": (1e-3, ROTARY), "deg": (DEG, ROTARY),
+                 "arcmin": (DEG / 60.0, ROTARY), "m": (1.0, TRANSLATIONAL),
+                 "mm": (1e-3, TRANSLATIONAL), "um": (1e-6, TRANSLATIONAL)},
+    "velocity": {"rad/s": (1.0, ROTARY), "deg/s": (DEG, ROTARY), "rpm": (RPM, ROTARY),
+                 "m/s": (1.0, TRANSLATIONAL), "mm/s": (1e-3, TRANSLATIONAL)},
+    "force": {"N*m": (1.0, ROTARY), "mN*m": (1e-3, ROTARY), "N": (1.0, TRANSLATIONAL),
+              "kN": (1e3, TRANSLATIONAL)},
+    "mass": {"kg*m^2": (1.0, ROTARY), "g*cm^2": (1e-7, ROTARY), "kg": (1.0, TRANSLATIONAL),
+             "g": (1e-3, TRANSLATIONAL)},
+    "stiffness": {"N*m/rad": (1.0, ROTARY), "N*m/deg": (1.0 / DEG, ROTARY),
+                  "kN*m/rad": (1e3, ROTARY), "N/m": (1.0, TRANSLATIONAL),
+                  "N/mm": (1e3, TRANSLATIONAL), "N/um": (1e6, TRANSLATIONAL)},
+    "damping": {"N*m*s/rad": (1.0, ROTARY), "N*s/m": (1.0, TRANSLATIONAL)},
+    "gain": {"N*m/V": (1.0, ROTARY), "N/V": (1.0, TRANSLATIONAL), "N*m/A": (1.0, ROTARY),
+             "N/A": (1.0, TRANSLATIONAL)},
+    "velocity_gain": {"V*s/rad": (1.0, ROTARY), "V*s/m": (1.0, TRANSLATIONAL),
+                      "V*s/mm": (1e3, TRANSLATIONAL)},
+    "position_gain_i": {"V/rad": (1.0, ROTARY), "V/m": (1.0, TRANSLATIONAL)},
+    "ratio": {"-": (1.0, ROTARY), "rad/m": (1.0, TRANSLATIONAL)},
+}
+"""Units of the load-side quantities of an actuator description, by kind: unit -> (SI factor of
+the axis, the axis it belongs to). A value of the other axis's domain is refused."""
+MOTOR_UNITS: dict[str, dict[str, float]] = {
+    "inertia": {"kg*m^2": 1.0, "g*cm^2": 1e-7},
+    "damping": {"N*m*s/rad": 1.0},
+    "torque": {"N*m": 1.0, "mN*m": 1e-3},
+    "torque_constant": {"N*m/A": 1.0},
+    "emf_constant": {"V*s/rad": 1.0, "V/krpm": 1.0 / (1000.0 * RPM)},
+    "resistance": {"ohm": 1.0, "mohm": 1e-3},
+    "inductance": {"H": 1.0, "mH": 1e-3, "uH": 1e-6},
+    "current": {"A": 1.0},
+    "voltage": {"V": 1.0},
+    "time": {"s": 1.0, "ms": 1e-3},
+    "frequency": {"Hz": 1.0},
+    "rate": {"1/s": 1.0},
+    "rate2": {"1/s^2": 1.0},
+    "speed": {"rad/s": 1.0, "rpm": RPM},
+    "length": {"m": 1.0, "mm": 1e-3},
+    "command": {"V": 1.0, "A": 1.0, "N": 1.0, "N*m": 1.0},
+}
+"""Units of the motor-side and electrical quantities (always rotary or axis-free)."""
+AXIS_SI = {ROTARY: {"position": "rad", "velocity": "rad/s", "force": "N*m", "mass": "kg*m^2",
+                    "stiffness": "N*m/rad", "damping": "N*m*s/rad", "gain": "N*m/V",
+                    "velocity_gain": "V*s/rad", "position_gain_i": "V/rad", "ratio": "-"},
+           TRANSLATIONAL: {"position": "m", "velocity": "m/s", "force": "N", "mass": "kg",
+                           "stiffness": "N/m", "damping": "N*s/m", "gain": "N/V",
+                           "velocity_gain": "V*s/m", "position_gain_i": "V/m",
+                           "ratio": "rad/m"}}
+"""The SI unit of each load-side kind on each axis."""
+
+
+def parse_quantity(value: Any, kind: str, axis: str | None) -> float:
+    """A description's value -> SI of the axis: a number (already SI of the axis) or a string
+    ``"<number> <unit>"`` with a unit of ``kind`` (load-side kinds check the unit's axis;
+    ``axis`` None: a motor-side or electrical kind of :data:`MOTOR_UNITS`). Raises ValueError
+    with a message that says what was expected."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected a number or '<number> <unit>', got the boolean "
+                         f"{str(value).lower()}")
+    if isinstance(value, int | float):
+        x = float(value)
+        if not math.isfinite(x):
+            raise ValueError(f"must be finite, got {value}")
+        return x
+    if not isinstance(value, str):
+        raise ValueError(f"expected a number or '<number> <unit>', got {value!r}")
+    parts = value.strip().split(None, 1)
+    try:
+        x = float(parts[0])
+    except (ValueError, IndexError):
+        raise ValueError(f"expected '<number> <unit>', got {value!r}") from None
+    if not math.isfinite(x):
+        raise ValueError(f"must be finite, got {value!r}")
+    if len(parts) == 1:
+        return x
+    unit = parts[1].strip().replace("·", "*").replace("²", "^2").replace("µ", "u")
+    if axis is None:
+        table = MOTOR_UNITS[kind]
+        if unit not in table:
+            raise ValueError(f"unit {unit!r} is not a unit of {kind}; expected one of "
+                             f"{', '.join(table)}")
+        return x * table[unit]
+    table2 = QUANTITY_UNITS[kind]
+    if unit not in table2:
+        raise ValueError(f"unit {unit!r} is not a unit of {kind}; expected one of "
+                         f"{', '.join(u for u, (_, d) in table2.items() if d == axis)}")
+    factor, domain = table2[unit]
+    if domain != axis:
+        ok = ", ".join(u for u, (_, d) in table2.items() if d == axis)
+        raise ValueError(f"{unit} is a {domain} unit; a {axis} axis expects {kind} in {ok}")
+    return x * factor

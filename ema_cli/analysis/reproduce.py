@@ -166,7 +166,7 @@ def compute_threshold(path: Path, spec: ThresholdSpec,
     """Run one threshold search of the batch; ``plant``: SI overrides on top of its config
     (e.g. a tuned controller)."""
     cfg, cpath = study_config(path, spec.config)
-    signal = input_signal(cfg.input, cpath.parent, cfg.load)
+    signal = input_signal(cfg.input, cpath.parent, cfg.load, cfg.axis)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != spec.vary}
     ev = simulation_evaluator(spec.vary, {**cfg.plant_overrides(), **(plant or {})}, nls,
                               signal,

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
 from ema_cli.errors import EmaError
-from ema_cli.sim.tables import METRICS, SIGNALS
+from ema_cli.sim.tables import MET, METRICS, SIGNALS
 
 if TYPE_CHECKING:
     import numpy as np
@@ -69,9 +69,38 @@ class Simulation:
         return bool(self.batch.diverged[0])
 
     @property
+    def axis(self) -> str:
+        """The actuator's axis: rotary (deg, rpm, N*m) or translational (mm, mm/s, N)."""
+        return self.config.axis
+
+    @property
+    def shown(self) -> frozenset[str]:
+        """The kernel names of the signals and metrics this actuator has (``tables.shown``)."""
+        from ema_cli.sim.tables import shown
+
+        a = self.config.actuator
+        motor = a is None or a.axis == "rotary" or a.ratio is not None
+        return shown(self.params, motor)
+
+    @property
+    def metric_columns(self) -> tuple:
+        """The metrics of this actuator, named and scaled for its axis."""
+        from ema_cli.sim.tables import for_axis
+
+        return tuple(c for c in for_axis(METRICS, self.axis) if c.name in self.shown)
+
+    @property
+    def signal_columns(self) -> tuple:
+        """The recorded signals of this actuator, named and scaled for its axis."""
+        from ema_cli.sim.tables import for_axis
+
+        return tuple(c for c in for_axis(self.batch.columns, self.axis) if c.name in self.shown)
+
+    @property
     def summary(self) -> dict[str, float]:
         """Every metric in edge units, by edge column name (``overshoot_pct``, ...)."""
-        return {c.edge: float(self.batch.metrics[0, j] * c.factor) for j, c in enumerate(METRICS)}
+        cols = self.metric_columns
+        return {c.edge: float(self.batch.metrics[0, MET[c.name]] * c.factor) for c in cols}
 
     @property
     def metrics(self) -> pd.DataFrame:
@@ -85,21 +114,21 @@ class Simulation:
     def signal(self, name: str) -> np.ndarray:
         """One recorded signal in its edge unit, by kernel or edge name (``theta_load`` or
         ``theta_load_deg``); sampled at :attr:`t`."""
-        col = signal_column(name)
         if self.batch.signals is None:
             raise EmaError("no signals were recorded (simulation.output_interval_s is null)")
-        k = SIGNALS.index(col)
-        if k >= self.batch.signals.shape[2]:
-            raise EmaError(f"signal {name!r} is not recorded for this actuator")
-        return self.batch.signals[0, :, k] * col.factor
+        for c in self.signal_columns:
+            if name in (c.name, c.edge):
+                return self.batch.signals[0, :, SIGNALS.index(signal_column(c.name))] * c.factor
+        raise EmaError(f"unknown signal {name!r} for this actuator; expected one of "
+                       f"{', '.join(c.edge for c in self.signal_columns)}")
 
     def table(self) -> dict[str, np.ndarray]:
         """``t_s`` and every recorded signal in edge units (the columns of timeseries.csv)."""
         if self.batch.signals is None:
             raise EmaError("no signals were recorded (simulation.output_interval_s is null)")
         out = {"t_s": self.t}
-        for j, c in enumerate(self.batch.columns):
-            out[c.edge] = self.batch.signals[0, :, j] * c.factor
+        for c in self.signal_columns:
+            out[c.edge] = self.batch.signals[0, :, SIGNALS.index(signal_column(c.name))] * c.factor
         return out
 
     def to_pandas(self, form: str = "wide") -> pd.DataFrame:
@@ -113,7 +142,7 @@ class Simulation:
         if form != "long":
             raise EmaError(f"form must be 'wide' or 'long', got {form!r}")
         long = wide.melt(id_vars="t_s", var_name="signal", value_name="value")
-        long.insert(2, "unit", long["signal"].map(_edge_units()))
+        long.insert(2, "unit", long["signal"].map(_edge_units(self.signal_columns)))
         return long
 
     # ------------------------------------------------------------------ pictures and files
@@ -129,7 +158,7 @@ class Simulation:
         """Position and velocity tracking and their errors vs time (a matplotlib Figure)."""
         from ema_cli.report.figures import tracking_figure
 
-        return tracking_figure(self.table(), self.title)
+        return tracking_figure(self.table(), self.title, self.axis)
 
     def save(self, folder: str | Path | None = None, worker: Any = None) -> Path:
         """Write the run's folder as ``ema simulate`` does (timeseries.csv, metrics.csv,
@@ -178,21 +207,11 @@ class Simulation:
             warnings=self.warnings)
 
 
-def _edge_units() -> dict[str, str]:
-    """Edge column name -> its unit as written in the name's suffix convention."""
-    units = {}
-    for c in SIGNALS:
-        if c.factor == 1.0:
-            units[c.edge] = c.si_unit
-        elif c.edge.endswith("_deg"):
-            units[c.edge] = "deg"
-        elif c.edge.endswith("_deg_s"):
-            units[c.edge] = "deg/s"
-        elif c.edge.endswith("_rpm"):
-            units[c.edge] = "rpm"
-        else:
-            units[c.edge] = c.si_unit
-    return units
+def _edge_units(columns: tuple) -> dict[str, str]:
+    """Edge column name -> its unit (``sim.tables.edge_unit``)."""
+    from ema_cli.sim.tables import edge_unit
+
+    return {c.edge: edge_unit(c) for c in columns}
 
 
 def simulate(

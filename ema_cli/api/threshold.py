@@ -180,7 +180,7 @@ def threshold(
     if both:
         raise EmaError(f"vary {vary} and plant.{both[0]} set the same model parameter; "
                        "remove plant." + both[0])
-    signal = input_signal(cfg.input, base_dir(config), cfg.load)
+    signal = input_signal(cfg.input, base_dir(config), cfg.load, cfg.axis)
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != vary}
     ev = simulation_evaluator(vary, cfg.plant_overrides(), nls, signal, cfg.simulation.duration_s,
                               cfg.simulation.dt_s, cfg.friction_reading)

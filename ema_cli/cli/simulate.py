@@ -36,6 +36,13 @@ SUMMARY_METRICS = (
     ("peak_voltage_cmd_v", "peak voltage demand", "V"),
     ("peak_load_rate_deg_s", "peak load rate", "deg/s"),
 )
+TRANSLATIONAL_SUMMARY = {"ss_err_pos_deg": ("ss_err_pos_mm", "mm"),
+                         "p2p_err_pos_deg": ("p2p_err_pos_mm", "mm"),
+                         "iae_pos_deg_s": ("iae_pos_mm_s", "mm*s"),
+                         "rms_err_vel_deg_s": ("rms_err_vel_mm_s", "mm/s"),
+                         "peak_voltage_cmd_v": ("peak_voltage_cmd_v", "V"),
+                         "peak_load_rate_deg_s": ("peak_load_rate_mm_s", "mm/s")}
+"""The summary's load-side rows on a translational axis (mm, mm/s)."""
 
 
 def check_nl_options(items: list[tuple[str, str]]) -> None:
@@ -62,6 +69,10 @@ def metrics_rows(row: dict[str, float], duration_s: float) -> list[tuple[str, st
     """The key metrics of one run: (what, value with its unit or in words)."""
     rows = []
     for key, label, unit in SUMMARY_METRICS:
+        if key not in row:
+            key, unit = TRANSLATIONAL_SUMMARY.get(key, (key, unit))
+        if key not in row:
+            continue  # a metric this actuator does not have (a current without a motor)
         word = NOT_REACHED.get(key, "n/a").format(duration=duration_s)
         rows.append((label, fmt_num(row[key], unit, nan=word)))
     return rows

@@ -164,8 +164,9 @@ def detect_kind(config: Path) -> str:
         return "design"
     if keys & {"scenarios", "variables", "optimiser"}:
         return "tune"
-    if keys & {"tests", "actuator"}:
-        return "acceptance"
+    if "tests" in keys or ("actuator" in keys and not keys & {"input", "simulation", "plant",
+                                                               "sweep", "nonlinearities"}):
+        return "acceptance"  # (a run config's actuator is a description beside its input)
     if keys & {"studies", "claims", "thresholds", "ranking", "identification", "paper"}:
         return "experiment"
     if keys & {"k_range", "alpha_range", "c_range", "ga", "synthetic", "method", "fit_c",
@@ -271,7 +272,7 @@ def validate_cmd(
     from ema_cli.config.loader import inert_input_warnings, input_signal
 
     # the files it refers to (input and load profiles) are read and checked too
-    signal = input_signal(cfg.input, config.parent, cfg.load)
+    signal = input_signal(cfg.input, config.parent, cfg.load, cfg.axis)
     for w in inert_input_warnings(signal, cfg.simulation.duration_s):
         err_console.print(f"warning: {w}", highlight=False)
     if not cfg.sweep.axes:  # a run config (`ema simulate`), or a study still without axes
@@ -313,7 +314,7 @@ def _check_actuator(actuator: Any, config: Path) -> None:
         return
     try:
         run = load_config(src, [], StudyConfig)
-        input_signal(run.input, here, run.load)
+        input_signal(run.input, here, run.load, run.axis)
     except EmaError as exc:
         raise EmaError(f"actuator.config: {exc}") from None
 

@@ -14,12 +14,12 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from ema_cli.config.inputs import _local, input_signal  # noqa: F401 (re-exported)
 from ema_cli.config.run import KEY_MARK, RunConfig
 from ema_cli.errors import EmaError
 from ema_cli.model.nonlinearities import combined_updates
 from ema_cli.model.params import INDEX, resolve
-from ema_cli.sim.signals import InputSignal, load_profile
-from ema_cli.units import DEG
+from ema_cli.sim.signals import InputSignal
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -317,11 +317,32 @@ def load_config(
     else:
         raise EmaError(f"config: expected a YAML file path, a dict, a config model or None, got "
                        f"{type(source).__name__}")
+    base = Path(source).parent if isinstance(source, str | Path) else None
+    data = inline_actuator(data, base, where)
     try:
         data = apply_overrides(data, overrides, list(model.model_fields))
     except RecursionError:
         raise EmaError(f"{where}: the config refers to itself or is nested too deeply") from None
     return validate(model, data, where)
+
+
+def inline_actuator(data: dict[str, Any], base: Path | None, where: str) -> dict[str, Any]:
+    """``actuator: FILE.yaml`` -> the description that file holds (its top level, or its
+    ``actuator`` section), read relative to the config's folder; a missing or bad file is one
+    line naming both files."""
+    ref = data.get("actuator") if isinstance(data, dict) else None
+    if not isinstance(ref, str):
+        return data
+    p = _local(ref, base)
+    if not p.is_file():
+        raise EmaError(f"{where}: actuator: the actuator file '{ref}' does not exist (looked "
+                       f"for '{p}')")
+    desc = read_yaml(p)
+    if isinstance(desc, dict) and set(desc) == {"actuator"}:
+        desc = desc["actuator"]
+    if not isinstance(desc, dict):
+        raise EmaError(f"{where}: actuator: '{p}' holds no actuator description (a mapping)")
+    return {**data, "actuator": desc}
 
 
 @dataclass(frozen=True)
@@ -353,51 +374,6 @@ def resolve_params(
                        "physically sensible magnitudes in plant and nonlinearities") from None
 
 
-def _local(path: str, base_dir: Path | None) -> Path:
-    """A path from a config: relative paths are relative to the config's folder (``base_dir``),
-    else to the working folder (a config given as a dict, or a file found only there)."""
-    p = Path(path)
-    if p.is_absolute() or base_dir is None:
-        return p
-    beside = base_dir / p
-    if beside.exists() or not p.exists():
-        return beside
-    return p
-
-
-def input_signal(cfg_input: Any, base_dir: Path | None = None,
-                 cfg_load: Any = None) -> InputSignal:
-    """InputConfig (degrees) [+ LoadConfig] -> InputSignal (SI); CSV profiles (the reference's
-    and the load torque's) are read and validated here."""
-    table = None
-    path = cfg_input.path
-    if cfg_input.kind == "csv":
-        p = _local(path, base_dir)
-        t, th = load_profile(p)
-        table = (tuple(t), tuple(th))
-        path = str(p)
-    load_table = load_path = None
-    if cfg_load is not None and cfg_load.profile:
-        p = _local(cfg_load.profile, base_dir)
-        t, tq = load_profile(p, value="torque_nm", scale=1.0)
-        load_table = (tuple(t), tuple(tq))
-        load_path = str(p)
-    return InputSignal(
-        kind=cfg_input.kind,
-        amplitude=cfg_input.amplitude_deg * DEG,
-        start=cfg_input.start_s,
-        rate=cfg_input.rate_deg_s * DEG,
-        freq=cfg_input.freq_hz,
-        freq_end=cfg_input.freq_end_hz,
-        sweep_time=cfg_input.sweep_time_s,
-        offset=cfg_input.offset_deg * DEG,
-        path=path,
-        table=table,
-        load_table=load_table,
-        load_path=load_path,
-    )
-
-
 def inert_input_warnings(signal: InputSignal, duration: float) -> list[str]:
     """Warnings for inputs that do nothing within a run of ``duration`` [s]: a reference that
     starts at or after the end, a profile (reference or load torque) whose first row is at or
@@ -419,6 +395,7 @@ def resolve_run(cfg: RunConfig, base_dir: Path | None = None) -> ResolvedRun:
     """A validated RunConfig -> ResolvedRun (SI)."""
     params = resolve_params(cfg.plant_overrides(), cfg.nonlinearities, cfg.friction_reading)
     sim = cfg.simulation
-    return ResolvedRun(params, input_signal(cfg.input, base_dir, cfg.load), sim.duration_s,
+    return ResolvedRun(params, input_signal(cfg.input, base_dir, cfg.load, cfg.axis),
+                       sim.duration_s,
                        sim.dt_s,
                        sim.output_interval_s)

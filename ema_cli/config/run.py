@@ -15,6 +15,7 @@ from typing import Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from ema_cli.config.actuator import Actuator
 from ema_cli.config.base import (
     FiniteFloat,
     NonNegFloat,
@@ -42,6 +43,18 @@ KEY_MARK = "\x00"
 key path so errors read ``plant.kL: ...``."""
 
 
+class InputSignalConfig(Strict):
+    """One channel of a log as the run's input signal (held between its samples by default: a
+    logged DAC output)."""
+
+    path: str = Field(description="the log (CSV, Parquet, .mat)")
+    column: str = Field(description="the channel's column or variable")
+    unit: str | None = Field(None, description="its unit (V, A, N, N*m, ...; default SI)")
+    time_column: str = Field("t_s", description="the log's time column [s]")
+    hold: bool = Field(True, description="held between samples (true) or linear (false)")
+    scale: FiniteFloat = Field(1.0, description="a factor applied to it (e.g. a gain)")
+
+
 class InputConfig(Strict):
     """The position reference (load side), in degrees and seconds."""
 
@@ -59,12 +72,31 @@ class InputConfig(Strict):
     sweep_time_s: NonNegFloat = Field(
         0.0, description="chirp sweep time [s] (0: whole run)")
     offset_deg: FiniteFloat = Field(0.0, description="constant added to sine/chirp [deg]")
-    path: str | None = Field(None, description="CSV profile with columns t_s, theta_ref_deg")
+    amplitude: float | int | str | None = Field(
+        None, description="the amplitude with its unit, in the actuator's axis ('5 mm', "
+                          "'2 deg'; a translational axis takes this, not amplitude_deg)")
+    rate: float | int | str | None = Field(
+        None, description="ramp slope with its unit ('10 mm/s'; instead of rate_deg_s)")
+    offset: float | int | str | None = Field(
+        None, description="sine/chirp offset with its unit (instead of offset_deg)")
+    path: str | None = Field(None, description="profile file: a CSV with columns t_s, "
+                                               "theta_ref_deg, or any log (CSV, Parquet, .mat) "
+                                               "with column/unit")
+    column: str | None = Field(None, description="the profile's column (variable) in the log")
+    unit: str | None = Field(None, description="the profile column's unit (position: deg, "
+                                               "rad, m, mm, ...)")
+    time_column: str = Field("t_s", description="the log's time column [s] (a .mat: often 't')")
+    signal: InputSignalConfig | None = Field(
+        None, description="the input signal from a log: a disturbance added to the controller's "
+                          "output (actuator.disturbance: output) or the actuation (actuator."
+                          "controller.type: none)")
 
     @model_validator(mode="after")
     def _check(self) -> InputConfig:
         if self.kind == "csv" and not self.path:
             raise ValueError("input kind 'csv' needs 'path' (a CSV with t_s, theta_ref_deg)")
+        if self.column is not None and self.kind != "csv":
+            raise ValueError("input.column reads a profile: it needs kind 'csv'")
         if self.kind == "ramp" and self.rate_deg_s == 0:
             raise ValueError("input kind 'ramp' needs a non-zero 'rate_deg_s'")
         return self
@@ -253,6 +285,10 @@ class RunConfig(Strict):
     motor: MotorConfig = Field(default_factory=MotorConfig)
     controller: ControllerConfig = Field(default_factory=ControllerConfig)
     sensors: SensorsConfig = Field(default_factory=SensorsConfig)
+    actuator: Actuator | None = Field(
+        None, description="the actuator description (docs/model.md §3): inline, or the path of "
+                          "a YAML file holding one (configs/actuators/); absent: the paper's "
+                          "EMA")
     seed: Seed = Field(0, description="seed of everything random (0 .. 2**63-1)")
 
     @model_validator(mode="before")
@@ -289,6 +325,8 @@ class RunConfig(Strict):
     def describe_options(self) -> str:
         """The option sections in use, for titles and reports ('' when none)."""
         parts = []
+        if self.actuator is not None:
+            parts.append(f"actuator {self.actuator.name or self.actuator.axis}")
         if self.load.torque_nm:
             parts.append(f"load torque {self.load.torque_nm:g} N*m")
         if self.load.spring_nm_per_rad:
@@ -316,9 +354,16 @@ class RunConfig(Strict):
             parts.append(f"speed resolution {self.sensors.speed_resolution_rpm:g} rpm")
         return ", ".join(parts)
 
+    @property
+    def axis(self) -> str:
+        """The actuator's axis: rotary (the paper's EMA) or translational."""
+        return self.actuator.axis if self.actuator is not None else "rotary"
+
     def plant_overrides(self) -> dict[str, Any]:
-        """``plant`` (SI) together with the parameters of the option sections."""
-        return {**self.plant, **self.section_params()}
+        """The actuator description's parameters, then ``plant`` (SI) and the parameters of the
+        option sections on top."""
+        base = self.actuator.params() if self.actuator is not None else {}
+        return {**base, **self.plant, **self.section_params()}
 
     @model_validator(mode="after")
     def _sections(self) -> RunConfig:
@@ -340,6 +385,37 @@ class RunConfig(Strict):
         if off_grid(ts, self.simulation.dt_s):
             raise ValueError(f"{key} ({ts:g} s) must be a whole multiple of simulation.dt_s "
                              f"({self.simulation.dt_s:g} s)")
+        return self
+
+    @model_validator(mode="after")
+    def _axis_units(self) -> RunConfig:
+        if self.axis == "translational":
+            for key in ("amplitude_deg", "rate_deg_s", "offset_deg"):
+                if key in self.input.model_fields_set:
+                    new = key.split("_")[0]
+                    raise ValueError(f"{KEY_MARK}input.{key}{KEY_MARK}a translational axis "
+                                     f"takes input.{new} with a length unit (e.g. '5 mm')")
+            if self.input.kind == "csv" and self.input.column is None:
+                raise ValueError(f"{KEY_MARK}input.column{KEY_MARK}a translational axis reads "
+                                 "its profile from a column with a length unit (column, unit)")
+        from ema_cli.units import parse_quantity
+
+        for key, kind in (("amplitude", "position"), ("rate", "velocity"),
+                          ("offset", "position")):
+            v = getattr(self.input, key)
+            if v is not None:
+                try:
+                    parse_quantity(v, kind, self.axis)
+                except ValueError as exc:
+                    raise ValueError(f"{KEY_MARK}input.{key}{KEY_MARK}{exc}") from None
+        if self.actuator is not None:
+            a = self.actuator
+            ext = a.controller.type == "none" or a.disturbance == "output"
+            if ext and self.input.signal is None:
+                what = ("the actuation (controller none)" if a.controller.type == "none"
+                        else "the disturbance on the controller's output")
+                raise ValueError(f"{KEY_MARK}input.signal{KEY_MARK}this actuator reads {what} "
+                                 "from an input signal: give input.signal (path, column, unit)")
         return self
 
     @model_validator(mode="after")

@@ -21,11 +21,16 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ema_cli.errors import EmaError
+from ema_cli.logs import (  # noqa: F401 (the readers live below every layer)
+    FORMATS,
+    MAX_LISTED,
+    LogTable,
+    read_log_table,
+)
 from ema_cli.units import LOG_UNITS, log_to_si
 
 LOG_CHANNELS: dict[str, tuple[str, str]] = {
@@ -37,220 +42,7 @@ LOG_CHANNELS: dict[str, tuple[str, str]] = {
     "voltage_cmd_v": ("voltage", "V"),
 }
 """ema's log channels -> (kind of unit, the channel's own unit): the keys of a column map."""
-FORMATS: dict[str, str] = {".csv": "CSV", ".txt": "CSV", ".parquet": "Parquet",
-                           ".pq": "Parquet", ".mat": "MATLAB"}
-"""File extension (lower case) -> format."""
 COLUMNS_OPTION = "--columns"  # the CLI option of the column map (settings key: columns)
-MAX_LISTED = 12  # names listed in an error about what a file holds [names]
-MAT_SKIP_PREFIX = "#"  # HDF5 members MATLAB keeps for itself (#refs#, #subsystem#)
-
-
-@dataclass(frozen=True)
-class LogTable:
-    """The columns of one log file as read, unchecked: ``raw[name]`` is a pandas Series (CSV,
-    Parquet) or an array of any shape (MATLAB); :meth:`column` checks one and returns floats."""
-
-    path: Path
-    fmt: str  # CSV, Parquet, MATLAB v5, MATLAB v7.3
-    raw: dict[str, Any]
-
-    @property
-    def noun(self) -> str:
-        """What the format calls a column: ``variable`` (MATLAB) or ``column``."""
-        return "variable" if self.fmt.startswith("MATLAB") else "column"
-
-    def where(self, i: int) -> str:
-        """The place of sample ``i`` (0-based) as the user finds it in the file: the CSV line
-        (the header is line 1), the Parquet data row or the MATLAB index (1-based)."""
-        if self.fmt == "CSV":
-            return f"line {i + 2}"
-        if self.fmt == "Parquet":
-            return f"row {i + 1}"
-        return f"index {i + 1}"
-
-    def listing(self) -> str:
-        """The names the file holds (vectors with their length), at most MAX_LISTED."""
-        items = []
-        for name, value in self.raw.items():
-            if self.fmt.startswith("MATLAB"):
-                vec = _mat_vector(value)
-                items.append(f"{name} [{vec.size}]" if isinstance(vec, np.ndarray)
-                             else f"{name} ({vec})")
-            else:
-                items.append(str(name))
-        more = len(items) - MAX_LISTED
-        return (", ".join(items[:MAX_LISTED]) + (f" and {more} more" if more > 0 else "")
-                or "none")
-
-    def column(self, name: str) -> np.ndarray:
-        """The column or variable ``name`` as a 1-D float64 array, every value finite; else
-        an EmaError naming the file, the name and the first bad place."""
-        value = self.raw[name]
-        p = self.path
-        if self.fmt.startswith("MATLAB"):
-            vec = _mat_vector(value)
-            if not isinstance(vec, np.ndarray):
-                raise EmaError(f"data file '{p}': variable '{name}' is {vec}; expected a "
-                               "numeric vector (N, Nx1 or 1xN)")
-            what = "NaN or inf"
-        else:
-            import pandas as pd
-
-            try:
-                vec = pd.to_numeric(value, errors="coerce").to_numpy(np.float64)
-            except (TypeError, ValueError):
-                raise EmaError(f"data file '{p}': column '{name}' is not numeric (dtype "
-                               f"{value.dtype}); expected numbers") from None
-            what = "empty, non-numeric, NaN or inf"
-        bad = ~np.isfinite(vec)
-        if bad.any():
-            raise EmaError(f"data file '{p}': {self.noun} '{name}' has {int(bad.sum())} {what} "
-                           f"value(s) (first at {self.where(int(np.flatnonzero(bad)[0]))})")
-        return vec
-
-
-def _mat_vector(value: Any) -> np.ndarray | str:
-    """A MATLAB value as a float64 vector, or a few words on what it is instead."""
-    if isinstance(value, str):
-        return value  # a description made by the reader (h5py groups, references)
-    a = np.asarray(value)
-    if a.dtype.names is not None:
-        return "a struct"
-    kind = a.dtype.kind
-    if kind == "O":
-        return "a cell array"
-    if kind in "US":
-        return "text"
-    if kind == "c":
-        return "complex"
-    if kind not in "biuf":
-        return f"not numeric (dtype {a.dtype})"
-    if a.size == 0:
-        return "empty"
-    if sum(d > 1 for d in a.shape) > 1:
-        return f"a {'x'.join(map(str, a.shape))} matrix, not a vector"
-    return a.reshape(-1).astype(np.float64)
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return text[0] if text else type(exc).__name__
-
-
-def read_log_table(path: str | Path) -> LogTable:
-    """Read the columns of a log file, the format chosen by its extension (:data:`FORMATS`);
-    a missing, empty, unreadable or corrupt file is an EmaError naming it."""
-    p = Path(path)
-    if not p.exists():
-        raise EmaError(f"data file '{p}' does not exist")
-    if not p.is_file():
-        raise EmaError(f"data file '{p}' is not a file")
-    fmt = FORMATS.get(p.suffix.lower())
-    if fmt is None:
-        raise EmaError(f"data file '{p}': unknown format '{p.suffix}'; expected .csv or .txt "
-                       "(CSV), .parquet or .pq (Parquet), .mat (MATLAB v5 or v7.3)")
-    if p.stat().st_size == 0:
-        raise EmaError(f"data file '{p}' is empty")
-    if fmt == "CSV":
-        return _read_csv(p)
-    if fmt == "Parquet":
-        return _read_parquet(p)
-    return _read_mat(p)
-
-
-def _read_csv(p: Path) -> LogTable:
-    import pandas as pd
-
-    try:
-        df = pd.read_csv(p)
-    except Exception as exc:  # pandas raises many types for malformed files
-        raise EmaError(f"data file '{p}' is not a readable CSV: {_first_line(exc)}") from None
-    return LogTable(p, "CSV", {str(c): df[c] for c in df.columns})
-
-
-def _read_parquet(p: Path) -> LogTable:
-    import pandas as pd
-
-    try:
-        df = pd.read_parquet(p, engine="pyarrow")
-    except Exception as exc:  # pyarrow: ArrowInvalid, OSError, ... for a corrupt file
-        raise EmaError(f"data file '{p}' is not a readable Parquet file: "
-                       f"{_first_line(exc)}") from None
-    return LogTable(p, "Parquet", {str(c): df[c] for c in df.columns})
-
-
-def _read_mat(p: Path) -> LogTable:
-    import h5py
-    from scipy.io import loadmat
-    from scipy.io.matlab import matfile_version
-
-    try:
-        major = matfile_version(str(p))[0]
-    except Exception:  # text or garbage: scipy raises ValueError, IndexError, MatReadError
-        major = -1
-    if major == 2 or (major == -1 and h5py.is_hdf5(str(p))):
-        return _read_mat73(p)
-    if major == -1:
-        raise EmaError(f"data file '{p}' is not a readable MATLAB file (.mat v5 or v7.3): "
-                       "no MATLAB header")
-    try:
-        data = loadmat(str(p), squeeze_me=False, chars_as_strings=True)
-    except Exception as exc:  # truncated or corrupt v5 data
-        raise EmaError(f"data file '{p}' is not a readable MATLAB file (.mat v5): "
-                       f"{_first_line(exc)}") from None
-    raw = {k: v for k, v in data.items() if not k.startswith("__")}
-    if len(raw) == 1:
-        (name, value), = raw.items()
-        if isinstance(value, np.ndarray) and value.dtype.names is not None:
-            if value.size != 1:
-                raise EmaError(f"data file '{p}': struct '{name}' is a "
-                               f"{'x'.join(map(str, value.shape))} struct array; expected one "
-                               "struct whose fields are vectors")
-            rec = value.reshape(-1)[0]
-            raw = {f: rec[f] for f in value.dtype.names}
-    if not raw:
-        raise EmaError(f"data file '{p}' holds no MATLAB variables")
-    return LogTable(p, "MATLAB v5", raw)
-
-
-def _read_mat73(p: Path) -> LogTable:
-    import h5py
-
-    try:
-        with h5py.File(p, "r") as f:
-            members = {k: v for k, v in f.items() if not k.startswith(MAT_SKIP_PREFIX)}
-            datasets = {k: v for k, v in members.items() if isinstance(v, h5py.Dataset)}
-            groups = {k: v for k, v in members.items() if isinstance(v, h5py.Group)}
-            if not datasets and len(groups) == 1:
-                members = dict(next(iter(groups.values())).items())
-            raw = {k: _h5_value(v) for k, v in members.items()}
-    except EmaError:
-        raise
-    except Exception as exc:  # truncated or corrupt HDF5: OSError, KeyError, ...
-        raise EmaError(f"data file '{p}' is not a readable MATLAB file (.mat v7.3, HDF5): "
-                       f"{_first_line(exc)}") from None
-    if not raw:
-        raise EmaError(f"data file '{p}' holds no MATLAB variables")
-    return LogTable(p, "MATLAB v7.3", raw)
-
-
-def _h5_value(obj: Any) -> np.ndarray | str:
-    """One HDF5 member of a v7.3 file as an array (shape as stored) or what it is instead."""
-    import h5py
-
-    if isinstance(obj, h5py.Group):
-        return "a struct"
-    cls = obj.attrs.get("MATLAB_class", b"")
-    cls = cls.decode() if isinstance(cls, bytes) else str(cls)
-    if cls == "char":
-        return "text"
-    if cls == "cell" or obj.dtype.kind == "O":
-        return "a cell array"
-    if int(obj.attrs.get("MATLAB_empty", 0)):
-        return "empty"
-    if obj.dtype.names is not None:
-        return "complex" if set(obj.dtype.names) == {"real", "imag"} else "a compound value"
-    return np.asarray(obj[()]).T  # column-major on disk: back to MATLAB's N x M
 
 
 def parse_column_spec(channel: str, spec: str) -> tuple[str, str]:

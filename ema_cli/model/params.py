@@ -288,9 +288,15 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
     values: dict[str, float | None] = {p.name: p.default for p in PARAMS}
     for name, raw in (overrides or {}).items():
         values[name] = check_value(name, raw)
+    rigid = values["rigid"] == 1.0
+    amp = values["drive"] == 1.0
     for name in ("m", "Jm", "JL", "L"):
+        if (name == "Jm" and rigid) or (name == "L" and amp):
+            continue  # a rigid axis lumps the motor's inertia in JL; an amplifier has no L
         if not values[name]:
             raise EmaError(f"parameter '{name}' must be > 0, got {values[name]}")
+    if rigid and not values["JL"] + values["m"] ** 2 * values["Jm"] > 0:  # type: ignore[operator]
+        raise EmaError("a rigid axis needs a mass (inertia) JL + m^2*Jm > 0")
     if values["contact_hc"] > 1.0:  # type: ignore[operator]
         raise EmaError(f"parameter 'contact_hc' must be in [0, 1] (-), got {values['contact_hc']}")
     if not values["contact_pen"]:

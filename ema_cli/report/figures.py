@@ -68,37 +68,47 @@ def legend_outside(ax: Any, **kwargs: Any) -> Any:
     return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
 
 
-def tracking_figure(ts: Mapping[str, Any], title: str) -> Figure:
+def tracking_figure(ts: Mapping[str, Any], title: str, axis: str | None = None) -> Figure:
     """Position and velocity: reference and response (top), their errors (bottom), vs time.
 
-    ``ts`` maps edge-unit column names (``t_s``, ``theta_ref_deg``, ...) to arrays: a
-    DataFrame or a dict (``BatchResult.signals_frame``, ``api.Simulation.table``).
+    ``ts`` maps edge-unit column names (``t_s``, ``theta_ref_deg`` or ``x_ref_mm``, ...) to
+    arrays: a DataFrame or a dict (``BatchResult.signals_frame``, ``api.Simulation.table``);
+    ``axis`` rotary (deg, deg/s) or translational (mm, mm/s); None: the table's columns say. The
+    motor's line is drawn when the table has it.
     """
+    rot = axis == "rotary" if axis is not None else "x_ref_mm" not in ts
+    pos, vel = ("deg", "deg/s") if rot else ("mm", "mm/s")
+    col = (lambda n: f"{n}_deg") if rot else (lambda n: f"{n}_mm")
+    vcol = (lambda n: f"{n}_deg_s") if rot else (lambda n: f"{n}_mm_s")
+    names = (("theta_ref", "theta_load", "theta_motor", "omega_ref", "omega_load") if rot
+             else ("x_ref", "x_load", "x_motor", "v_ref", "v_load"))
     fig, axes = subplots(2, 2, figsize=(12, 7), sharex=True)
     t = ts["t_s"]
     ax = axes[0, 0]
-    ax.plot(t, ts["theta_ref_deg"], "k--", lw=1.2, label="reference")
-    ax.plot(t, ts["theta_load_deg"], "C0", lw=1.4, label="load angle")
-    ax.plot(t, ts["theta_motor_deg"], "C1", lw=0.9, alpha=0.8, label="motor angle / m")
-    ax.set_ylabel("position [deg]")
+    ax.plot(t, ts[col(names[0])], "k--", lw=1.2, label="reference")
+    ax.plot(t, ts[col(names[1])], "C0", lw=1.4, label="load angle" if rot else "load position")
+    if col(names[2]) in ts:
+        ax.plot(t, ts[col(names[2])], "C1", lw=0.9, alpha=0.8, label="motor angle / m" if rot
+                else "motor angle / ratio")
+    ax.set_ylabel(f"position [{pos}]")
     ax.set_title("Position tracking")
     ax.legend(loc="best", fontsize=8)
     ax = axes[0, 1]
-    ax.plot(t, ts["omega_ref_deg_s"], "k--", lw=1.2, label="reference")
-    ax.plot(t, ts["omega_load_deg_s"], "C0", lw=1.4, label="load speed")
-    ax.set_ylabel("velocity [deg/s]")
+    ax.plot(t, ts[vcol(names[3])], "k--", lw=1.2, label="reference")
+    ax.plot(t, ts[vcol(names[4])], "C0", lw=1.4, label="load speed" if rot else "load velocity")
+    ax.set_ylabel(f"velocity [{vel}]")
     ax.set_title("Velocity tracking")
     ax.legend(loc="best", fontsize=8)
     ax = axes[1, 0]
-    ax.plot(t, ts["err_pos_deg"], "C3", lw=1.2)
+    ax.plot(t, ts[col("err_pos")], "C3", lw=1.2)
     ax.axhline(0, color="0.6", lw=0.6)
-    ax.set_ylabel("position error [deg]")
+    ax.set_ylabel(f"position error [{pos}]")
     ax.set_xlabel("time [s]")
     ax.set_title("Position error (reference - load)")
     ax = axes[1, 1]
-    ax.plot(t, ts["err_vel_deg_s"], "C3", lw=1.2)
+    ax.plot(t, ts[vcol("err_vel")], "C3", lw=1.2)
     ax.axhline(0, color="0.6", lw=0.6)
-    ax.set_ylabel("velocity error [deg/s]")
+    ax.set_ylabel(f"velocity error [{vel}]")
     ax.set_xlabel("time [s]")
     ax.set_title("Velocity error (reference - load)")
     for a in axes.flat:

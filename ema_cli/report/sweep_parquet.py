@@ -36,9 +36,8 @@ from ema_cli import __version__
 from ema_cli.errors import EmaError
 from ema_cli.files import AtomicFile
 from ema_cli.report.sweep_tables import axis_unit
-from ema_cli.sim.tables import SIGNALS, Column
+from ema_cli.sim.tables import SIGNALS, Column, edge_unit  # noqa: F401 (re-exported)
 from ema_cli.sweep.run import JOB_COLUMN, TIME_COLUMN
-from ema_cli.units import DEG, RPM
 
 if TYPE_CHECKING:
     from ema_cli.sweep.plan import Plan
@@ -255,17 +254,6 @@ class SignalsWriter:
 DICTIONARY_SIGNALS = ("theta_ref_deg", "omega_ref_deg_s", "torque_load_nm")
 """Signals the same for every job of most sweeps (the input, the external torque):
 dictionary-encoded, they shrink to almost nothing."""
-
-
-def edge_unit(col: Column) -> str:
-    """The unit of a signal or metric column at the edge (``deg``, ``rpm``, ``N*m``, ...)."""
-    if math.isclose(col.factor, 1 / DEG):
-        return col.si_unit.replace("rad", "deg")
-    if math.isclose(col.factor, 1 / DEG**2):
-        return col.si_unit.replace("rad^2", "deg^2")
-    if math.isclose(col.factor, 1 / RPM):
-        return "rpm"
-    return col.si_unit
 
 
 def _swept_units(plan: Plan) -> dict[str, str]:

@@ -54,12 +54,26 @@ def plan_steps(duration: float, dt: float, output_interval: float | None) -> tup
 
 def resolution_warnings(params: Mapping[str, float], dt: float) -> list[str]:
     """Warnings for dynamics that look under-resolved by the fixed step ``dt`` [s]."""
-    rates = {"electrical pole R/L": params["R"] / params["L"]}
-    jeq = equivalent_inertia(params)
-    rates["transmission mode sqrt(kL/Jeq)"] = math.sqrt(params["kL"] / jeq)
-    rates["transmission damping c/Jeq"] = params["c"] / jeq
-    if params["friction"]:
-        rates["viscous friction sigma2/Jm"] = params["sigma2"] / params["Jm"]
+    rates: dict[str, float] = {}
+    amp = params.get("drive", 0.0) == 1.0
+    if not amp:
+        rates["electrical pole R/L"] = params["R"] / params["L"]
+    elif params.get("amp_tau", 0.0) > 0:
+        rates["amplifier bandwidth 1/tau"] = 1.0 / params["amp_tau"]
+    m2 = params["m"] ** 2
+    if params.get("rigid", 0.0) == 1.0:
+        jtot = params["JL"] + m2 * params["Jm"]
+        visc = (params["bL"] + m2 * params["bm"] + params.get("Fv_L", 0.0)
+                + (m2 * params["sigma2"] if params["friction"] else 0.0))
+        rates["viscous time constant of the axis"] = visc / jtot
+    else:
+        jeq = equivalent_inertia(params)
+        rates["transmission mode sqrt(kL/Jeq)"] = math.sqrt(params["kL"] / jeq)
+        rates["transmission damping c/Jeq"] = params["c"] / jeq
+        if params["friction"]:
+            rates["viscous friction sigma2/Jm"] = params["sigma2"] / params["Jm"]
+        if params.get("friction_L", 0.0):
+            rates["load viscous friction Fv_L/JL"] = params["Fv_L"] / params["JL"]
     out = []
     for what, rate in rates.items():
         if rate * dt > RESOLUTION_LIMIT:

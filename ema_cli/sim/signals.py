@@ -87,7 +87,7 @@ class InputSignal:
             return f"sine {a:g} deg, {self.freq:g} Hz"
         if self.kind == "chirp":
             return f"chirp {a:g} deg, {self.freq:g} -> {self.freq_end:g} Hz"
-        return f"profile {self.path}"
+        return f"profile {Path(self.path).name if self.path else ''}"
 
 
 def load_profile(path: str | Path, value: str = "theta_ref_deg",

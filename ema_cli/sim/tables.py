@@ -6,6 +6,7 @@ column to its edge unit once, when a table is written or plotted.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ema_cli.units import DEG, RPM
@@ -96,6 +97,92 @@ METRICS: tuple[Column, ...] = (
     _col("diverged", "-", "diverged", 1.0, "1 if the run went non-finite or ran away"),
     _col("t_end", "s", "t_end_s", 1.0, "time reached (the duration unless diverged)"),
 )
+
+TRANSLATIONAL_NAMES: dict[str, tuple[str, float, str]] = {
+    # signals: kernel name -> (edge column, SI -> edge factor, SI unit) on a translational axis
+    "theta_ref": ("x_ref_mm", 1e3, "m"), "theta_load": ("x_load_mm", 1e3, "m"),
+    "theta_motor": ("x_motor_mm", 1e3, "m"), "omega_ref": ("v_ref_mm_s", 1e3, "m/s"),
+    "omega_load": ("v_load_mm_s", 1e3, "m/s"), "torque_shaft": ("force_shaft_n", 1.0, "N"),
+    "err_pos": ("err_pos_mm", 1e3, "m"), "err_vel": ("err_vel_mm_s", 1e3, "m/s"),
+    "dtheta": ("dx_mm", 1e3, "m"), "domega": ("dv_mm_s", 1e3, "m/s"),
+    "torque_load": ("force_load_n", 1.0, "N"), "drive_force": ("drive_force_n", 1.0, "N"),
+    "friction_load": ("friction_load_n", 1.0, "N"),
+    # metrics
+    "iae_pos": ("iae_pos_mm_s", 1e3, "m*s"), "ise_pos": ("ise_pos_mm2_s", 1e6, "m^2*s"),
+    "itae_pos": ("itae_pos_mm_s2", 1e3, "m*s^2"), "rms_pos": ("rms_err_pos_mm", 1e3, "m"),
+    "max_pos": ("max_abs_err_pos_mm", 1e3, "m"), "iae_vel": ("iae_vel_mm", 1e3, "m"),
+    "ise_vel": ("ise_vel_mm2_s", 1e6, "m^2/s"), "itae_vel": ("itae_vel_mm_s", 1e3, "m*s"),
+    "rms_vel": ("rms_err_vel_mm_s", 1e3, "m/s"), "max_vel": ("max_abs_err_vel_mm_s", 1e3, "m/s"),
+    "ss_err_pos": ("ss_err_pos_mm", 1e3, "m"), "p2p_pos": ("p2p_err_pos_mm", 1e3, "m"),
+    "p2p_vel": ("p2p_err_vel_mm_s", 1e3, "m/s"),
+    "peak_load_rate": ("peak_load_rate_mm_s", 1e3, "m/s"),
+    "peak_torque": ("peak_force_shaft_n", 1.0, "N"),
+}
+"""The names and units of the load-side columns on a translational axis (mm, mm/s, N: never
+deg or N*m); the others (motor speed, current, voltages, times) read the same on both axes."""
+
+
+def for_axis(columns: tuple[Column, ...], axis: str = "rotary") -> tuple[Column, ...]:
+    """``columns`` named and scaled for ``axis``: the rotary names as they are, the
+    translational ones from :data:`TRANSLATIONAL_NAMES`."""
+    if axis == "rotary":
+        return columns
+    import dataclasses
+
+    out = []
+    for c in columns:
+        t = TRANSLATIONAL_NAMES.get(c.name)
+        out.append(c if t is None else dataclasses.replace(c, edge=t[0], factor=t[1],
+                                                           si_unit=t[2]))
+    return tuple(out)
+
+
+def shown(params: Mapping[str, float], motor: bool = True) -> frozenset[str]:
+    """The kernel names of the signals and metrics that mean something for the actuator of
+    ``params`` (SI parameters): the paper's EMA shows its 17 signals and every metric; a rigid
+    axis has no shaft (deflection, shaft torque), an amplifier without a torque constant no
+    current, a site without friction no friction signal, a translational axis without a ratio
+    (``motor`` False) no motor side."""
+    names = {c.name for c in SIGNALS} | {c.name for c in METRICS}
+    paper = (params.get("rigid", 0.0) == 0.0 and params.get("drive", 0.0) == 0.0
+             and params.get("ctrl", 0.0) == 0.0 and params.get("friction_L", 0.0) == 0.0
+             and params.get("friction", 0.0) != 2.0)
+    if paper:
+        return frozenset(names - {"drive_force", "friction_load"})
+    drop = set()
+    if params.get("rigid", 0.0) == 1.0:
+        drop |= {"dtheta", "domega", "torque_shaft", "peak_torque"}
+    if params.get("drive", 0.0) == 1.0 and params.get("Kt", 0.0) <= 0.0:
+        drop |= {"current", "peak_current"}
+    if params.get("friction", 0.0) != 1.0:
+        drop.add("bristle_z")
+    if params.get("friction", 0.0) == 0.0:
+        drop.add("torque_friction")
+    if params.get("friction_L", 0.0) == 0.0:
+        drop.add("friction_load")
+    if not motor:
+        drop |= {"theta_motor", "omega_motor"}
+    return frozenset(names - drop)
+
+
+def edge_unit(col: Column) -> str:
+    """The unit of a signal or metric column at the edge (``deg``, ``rpm``, ``mm/s``, ``N``)."""
+    import math
+
+    from ema_cli.units import RPM
+
+    if math.isclose(col.factor, 1 / DEG):
+        return col.si_unit.replace("rad", "deg")
+    if math.isclose(col.factor, 1 / DEG**2):
+        return col.si_unit.replace("rad^2", "deg^2")
+    if math.isclose(col.factor, 1 / RPM):
+        return "rpm"
+    if math.isclose(col.factor, 1e3) and "m" in col.si_unit:
+        return col.si_unit.replace("m", "mm", 1)
+    if math.isclose(col.factor, 1e6) and "m^2" in col.si_unit:
+        return col.si_unit.replace("m^2", "mm^2", 1)
+    return col.si_unit
+
 
 SIG: dict[str, int] = {c.name: i for i, c in enumerate(SIGNALS)}
 MET: dict[str, int] = {c.name: i for i, c in enumerate(METRICS)}

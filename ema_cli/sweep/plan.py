@@ -378,7 +378,7 @@ def plan_sweep(cfg: StudyConfig, base_dir: Path | None = None, source: str = "co
     sim = cfg.simulation
     record = cfg.outputs.needs_signals
     n_steps, dec = plan_steps(sim.duration_s, sim.dt_s, sim.output_interval_s)
-    sig = input_signal(cfg.input, base_dir, cfg.load)
+    sig = input_signal(cfg.input, base_dir, cfg.load, cfg.axis)
     ref = sampler(sig, sim.dt_s, n_steps)  # the one sampling of this run's reference
     axes = [_axis_info(k, a) for k, a in enumerate(cfg.sweep.axes)]
     check_columns(axes, source)

@@ -132,6 +132,10 @@ def build_scenarios(cfg: TuneConfig, base_dir: Path | None
         except EmaError as exc:
             raise EmaError(f"actuator.config: {exc}") from None
     act_data: dict[str, Any] = read_yaml(src) if src is not None else {}
+    if src is not None:  # an actuator description in a file of its own: read beside the config
+        from ema_cli.config.loader import inline_actuator
+
+        act_data = inline_actuator(act_data, Path(src).parent, str(src))
     try:
         from ema_cli.config.loader import apply_overrides
 
