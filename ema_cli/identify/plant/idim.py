@@ -274,7 +274,7 @@ class IdimEstimate:
                            for n, v, s in zip(self.names, self.theta, self.std, strict=True)},
             "relative_error_pct": self.relative_error_pct, "sigma_n": self.sigma_n,
             "sigma_rule": self.sigma_rule, "rows": int(self.regression.y.size),
-            "condition_number": self.uncertainty.cond,
+            "condition_number_scaled_columns": self.uncertainty.cond,
         }
 
 
