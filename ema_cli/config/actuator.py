@@ -298,6 +298,12 @@ class Actuator(Strict):
         for name, v in out.items():  # lengths, masses, gains: none negative but the offset
             if isinstance(v, float) and v < 0 and name not in ("offset", "T_load", "k_h"):
                 raise ValueError(f"{KEY}{_KEY_OF.get(name, name)}{KEY}must be >= 0, got {v:g}")
+        positive = ["JL", "amp_gain", "L", "m"] + ([] if t.type == "rigid" else ["Jm"])
+        for name in positive:
+            if name in out and not out[name] > 0:  # type: ignore[operator]
+                key = ("load.mass" if a == TRANSLATIONAL else "load.inertia") if name == "JL" \
+                    else _KEY_OF.get(name, name)
+                raise ValueError(f"{KEY}{key}{KEY}must be > 0, got {out[name]:g}")
         return out
 
     def _drive(self, out: dict[str, float | str]) -> None:
@@ -357,9 +363,19 @@ class Actuator(Strict):
         if f.coulomb is None:
             raise ValueError(f"{KEY}{key}.coulomb{KEY}the {f.law} law needs its Coulomb level")
         out[law] = "lugre" if f.law == "lugre" else "static"
+        for k in ("coulomb", "static", "viscous", "bristle_stiffness", "bristle_damping"):
+            v = getattr(f, k)
+            if v is not None and _q(v, "stiffness" if k == "bristle_stiffness" else
+                                    ("damping" if k in ("viscous", "bristle_damping") else kf),
+                                    (self.axis if not motor else ROTARY)
+                                    if k.startswith("bristle") else axis, f"{key}.{k}") < 0:
+                raise ValueError(f"{KEY}{key}.{k}{KEY}must be >= 0, got {v}")
         c = _q(f.coulomb, kf, axis, f"{key}.coulomb")
         out[fc] = c
         out[fs] = _q(f.static, kf, axis, f"{key}.static") if f.static is not None else c
+        if f.law != "lugre" and out[fs] < c:  # type: ignore[operator]
+            raise ValueError(f"{KEY}{key}.static{KEY}the breakaway level ({f.static}) must be "
+                             f">= the Coulomb level ({f.coulomb})")
         if f.law == "coulomb":
             for k in ("stribeck_velocity", "exponent", "bristle_stiffness", "bristle_damping"):
                 if getattr(f, k) is not None:
@@ -393,6 +409,12 @@ class Actuator(Strict):
                              "bristles")
         if f.negative is not None:
             n = f.negative
+            for k in ("coulomb", "static", "viscous"):
+                v = getattr(n, k)
+                if v is not None and _q(v, kd if k == "viscous" else kf, axis,
+                                        f"{key}.negative.{k}") < 0:
+                    raise ValueError(f"{KEY}{key}.negative.{k}{KEY}must be >= 0 (the magnitude "
+                                     f"moving in -x), got {v}")
             if n.coulomb is not None:
                 out[fcn] = _q(n.coulomb, kf, axis, f"{key}.negative.coulomb")
             if n.static is not None:
@@ -438,7 +460,7 @@ class Actuator(Strict):
 PRESLIDING_M = 1e-6  # a translational load's LuGre default: sigma0 = Fc/this [m]
 _KEY_OF = {"m": "ratio", "kL": "transmission.stiffness", "c": "transmission.damping",
            "alpha": "transmission.backlash", "Jm": "motor.inertia", "bm": "motor.viscous",
-           "JL": "load.inertia/mass", "bL": "load.viscous", "amp_gain": "drive.gain",
+           "JL": "load.inertia or load.mass", "bL": "load.viscous", "amp_gain": "drive.gain",
            "amp_limit": "drive.limit", "R": "drive.resistance", "L": "drive.inductance",
            "Kt": "drive.torque_constant", "Ke": "drive.emf_constant"}
 """The description key a parameter comes from (for messages)."""

@@ -410,6 +410,13 @@ class RunConfig(Strict):
                     raise ValueError(f"{KEY_MARK}input.{key}{KEY_MARK}{exc}") from None
         if self.actuator is not None:
             a = self.actuator
+            c = a.controller
+            if c.type == "discrete" and c.sample_time_s is not None \
+                    and c.delay_samples * c.sample_time_s >= self.simulation.duration_s:
+                raise ValueError(f"{KEY_MARK}actuator.controller.delay_samples{KEY_MARK}"
+                                 f"{c.delay_samples} samples of {c.sample_time_s:g} s is not "
+                                 f"shorter than the run (simulation.duration_s = "
+                                 f"{self.simulation.duration_s:g} s)")
             ext = a.controller.type == "none" or a.disturbance == "output"
             if ext and self.input.signal is None:
                 what = ("the actuation (controller none)" if a.controller.type == "none"

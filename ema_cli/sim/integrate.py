@@ -127,67 +127,80 @@ def _event_value(x, s, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck
     return max(f - fp, -fn - f)
 
 
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _switching(x, s, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m, dir_m,
+               stuck_l, dir_l, hw):
+    """The switching function of the step (> 0: a site has switched): the largest of the
+    sites' (:func:`_event_value`) -> (value, that site; -1 when no site has static friction)."""
+    g = -1.0
+    first = -1
+    for site in (0, 1):
+        if not site_on(fl, site):
+            continue
+        gs = _event_value(x, s, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m,
+                          dir_m, stuck_l, dir_l, hw, site, stuck_m if site == 0 else stuck_l,
+                          dir_m if site == 0 else dir_l)
+        if first < 0 or gs > g:
+            g, first = gs, site
+    return g, first
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _breakaways(x, s0, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m, dir_m,
+                stuck_l, dir_l, hw):
+    """The stuck sites whose band the other forces already leave at ``s0`` (a sampled command
+    can jump): they break away there -> the modes."""
+    for site in (0, 1):
+        if not site_on(fl, site) or not (stuck_m if site == 0 else stuck_l):
+            continue
+        f = _other_force(x, s0, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m,
+                         dir_m, stuck_l, dir_l, hw, site)
+        fp, fn = breakaway_nb(lp, fl, site)
+        if not holds_nb(f, fp, fn):
+            if site == 0:
+                stuck_m, dir_m = False, (1.0 if f > 0.0 else -1.0)
+            else:
+                stuck_l, dir_l = False, (1.0 if f > 0.0 else -1.0)
+    return stuck_m, dir_m, stuck_l, dir_l
+
+
 @njit(cache=True, error_model="numpy")
 def hybrid_advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m, dir_m,
-                    stuck_l, dir_l, hw, variant):
+                   stuck_l, dir_l, hw, variant):
     """Advance a state with static friction sites over one step ``h``, locating every switch
     inside it: -> (state, stuck_m, dir_m, stuck_l, dir_l). A site that sticks at the step's
-    start breaks away there if the (possibly just sampled) forces already leave its band."""
-    sites = (0, 1)
+    start breaks away there if the (possibly just sampled) forces already leave its band.
+
+    Each part of the step (from the start or the last switch to the end) is one search with one
+    RK4 sub-step per trial (one call site, so the variant compiles one RK4, not three): the
+    whole part first; when the switching function (:func:`_switching`) is positive at its end,
+    regula falsi (Illinois) for the instant it crosses 0."""
     s0 = 0.0
-    for _ in range(MAX_EVENTS + 1):
-        # switches at the current instant (a stuck site's band left: it breaks away now)
-        for site in sites:
-            if not site_on(fl, site):
-                continue
-            stuck = stuck_m if site == 0 else stuck_l
-            if stuck:
-                f = _other_force(x, s0, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
-                                 stuck_m, dir_m, stuck_l, dir_l, hw, site)
-                fp, fn = breakaway_nb(lp, fl, site)
-                if not holds_nb(f, fp, fn):
-                    if site == 0:
-                        stuck_m = False
-                        dir_m = 1.0 if f > 0.0 else -1.0
-                    else:
-                        stuck_l = False
-                        dir_l = 1.0 if f > 0.0 else -1.0
-        xe = _sub_rk4(x, s0, 1.0, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
-                      stuck_m, dir_m, stuck_l, dir_l, hw, variant)
-        # the earliest switch in (s0, 1]
-        first = -1
-        s_first = 2.0
-        x_first = xe
-        for site in sites:
-            if not site_on(fl, site):
-                continue
-            stuck = stuck_m if site == 0 else stuck_l
-            d = dir_m if site == 0 else dir_l
-            g1 = _event_value(xe, 1.0, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
-                              stuck_m, dir_m, stuck_l, dir_l, hw, site, stuck, d)
-            if not g1 > 0.0:
-                continue
-            # regula falsi (Illinois) for the instant the switching function crosses 0
-            a, b = s0, 1.0
-            ga = _event_value(x, s0, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
-                              stuck_m, dir_m, stuck_l, dir_l, hw, site, stuck, d)
-            if ga > 0.0:  # switched at the start already (rounding): take it there
-                a, b, ga = s0, s0, 0.0
-            gb = g1
-            xb = xe
+    for ev in range(MAX_EVENTS + 1):
+        stuck_m, dir_m, stuck_l, dir_l = _breakaways(x, s0, inp, lp, fl, uh, disc, xn2, tfh,
+                                                     tf_b, visc, tf_bl, stuck_m, dir_m,
+                                                     stuck_l, dir_l, hw)
+        a, ga = s0, 0.0
+        g0, site0 = _switching(x, s0, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
+                               stuck_m, dir_m, stuck_l, dir_l, hw)
+        b, gb, xb, first = 1.0, 1.0, x, -1
+        if g0 > 0.0 and ev < MAX_EVENTS:  # switched at the start already (rounding)
+            b, first = s0, site0
+        else:
+            ga = g0
+            s = 1.0
             side = 0
-            for _it in range(EVENT_ITERATIONS):
-                if b - a <= EVENT_TOL:
-                    break
-                s = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
-                if not a < s < b:
-                    s = 0.5 * (a + b)
+            for it in range(EVENT_ITERATIONS + 1):
                 xs = _sub_rk4(x, s0, s, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
                               stuck_m, dir_m, stuck_l, dir_l, hw, variant)
-                gs = _event_value(xs, s, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
-                                  stuck_m, dir_m, stuck_l, dir_l, hw, site, stuck, d)
-                if gs > 0.0:
-                    b, gb, xb = s, gs, xs
+                gs, site = _switching(xs, s, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc,
+                                      tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw)
+                if it == 0:
+                    if not gs > 0.0 or ev == MAX_EVENTS:  # no switch (or no more allowed)
+                        return xs, stuck_m, dir_m, stuck_l, dir_l
+                    b, gb, xb, first = s, gs, xs, site
+                elif gs > 0.0:
+                    b, gb, xb, first = s, gs, xs, site
                     if side == -1:
                         ga *= 0.5
                     side = -1
@@ -196,50 +209,31 @@ def hybrid_advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stu
                     if side == 1:
                         gb *= 0.5
                     side = 1
-            if b < s_first:
-                first = site
-                s_first = b
-                x_first = xb if b > s0 else x
-        if first < 0:
-            return xe, stuck_m, dir_m, stuck_l, dir_l
-        # the switch of site `first` at s_first: a slipping site stops (speed exactly 0) and
-        # sticks or reverses; a stuck site breaks away
-        x = x_first
+                if b - a <= EVENT_TOL:
+                    break
+                s = (a * gb - b * ga) / (gb - ga) if gb != ga else 0.5 * (a + b)
+                if not a < s < b:
+                    s = 0.5 * (a + b)
+        # the switch of site `first` at b: a slipping site stops (speed exactly 0) and sticks
+        # or reverses; a stuck site breaks away
+        x = xb
         stuck = stuck_m if first == 0 else stuck_l
         if not stuck:
-            if first == 0:
+            x = _with_speed(x, first, 0.0)
+            if fl.rigid:
                 x = _with_speed(x, 0, 0.0)
-            else:
-                x = _with_speed(x, 1, 0.0)
-                if fl.rigid:
-                    x = _with_speed(x, 0, 0.0)
-            f = _other_force(x, s_first, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
-                             stuck_m, dir_m, stuck_l, dir_l, hw, first)
-            fp, fn = breakaway_nb(lp, fl, first)
-            hold = holds_nb(f, fp, fn)
-            nd = 1.0 if f > 0.0 else -1.0
-            if first == 0:
-                stuck_m = hold
-                dir_m = dir_m if hold else nd
-            else:
-                stuck_l = hold
-                dir_l = dir_l if hold else nd
+        f = _other_force(x, b, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m,
+                         dir_m, stuck_l, dir_l, hw, first)
+        fp, fn = breakaway_nb(lp, fl, first)
+        hold = (not stuck) and holds_nb(f, fp, fn)
+        nd = 1.0 if f > 0.0 else -1.0
+        if first == 0:
+            stuck_m, dir_m = hold, (dir_m if hold else nd)
         else:
-            f = _other_force(x, s_first, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
-                             stuck_m, dir_m, stuck_l, dir_l, hw, first)
-            nd = 1.0 if f > 0.0 else -1.0
-            if first == 0:
-                stuck_m = False
-                dir_m = nd
-            else:
-                stuck_l = False
-                dir_l = nd
-        s0 = s_first
+            stuck_l, dir_l = hold, (dir_l if hold else nd)
+        s0 = b
         if s0 >= 1.0:
             return x, stuck_m, dir_m, stuck_l, dir_l
-    # too many switches in one step: the rest in the modes reached
-    x = _sub_rk4(x, s0, 1.0, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m,
-                 dir_m, stuck_l, dir_l, hw, variant)
     return x, stuck_m, dir_m, stuck_l, dir_l
 
 

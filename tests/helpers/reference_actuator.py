@@ -630,6 +630,7 @@ def simulate(p: Mapping[str, float], sig: Any, t_out: np.ndarray, *, rtol: float
 
     u_held = 0.0
     n_events = 0
+    h = None
     for j, (ta, tags) in enumerate(bounds):
         tb = bounds[j + 1][0] if j + 1 < len(bounds) else None
         # the inputs' pieces on [ta, tb] (at the last instant: their right-hand limits there)
@@ -657,12 +658,22 @@ def simulate(p: Mapping[str, float], sig: Any, t_out: np.ndarray, *, rtol: float
 
             pending = [i for i in inside if t_out[i] > t]
             t_eval = np.array([t_out[i] for i in pending] + [tb])
+            first = None if h is None else min(h, tb - t)
             sol = solve_ivp(rhs, (t, tb), y, method="DOP853", rtol=rtol, atol=atol,
-                            events=[e[0] for e in evs] or None, t_eval=t_eval)
+                            events=[e[0] for e in evs] or None, t_eval=t_eval,
+                            first_step=first)
             if sol.status < 0:
                 raise RuntimeError(f"integration failed at t = {t}: {sol.message}")
-            for i, tt, yy in zip(pending, sol.t, sol.y.T, strict=False):
-                record(i, float(tt), yy, seg, md)
+            t_stop = float(sol.t[-1]) if len(sol.t) else t
+            if sol.status == 1:
+                t_stop = max(float(te[-1]) for te in sol.t_events if len(te))
+            # the next run's first step: this one's mean step (DOP853: 12 evaluations a step)
+            n_steps = (sol.nfev - (2 if first is None else 0)) / 12.0
+            if t_stop > t and n_steps >= 1:
+                h = (t_stop - t) / n_steps
+            if len(sol.t):  # the recorded instants reached (up to an event)
+                for i, tt, yy in zip(pending, sol.t, np.asarray(sol.y).T, strict=False):
+                    record(i, float(tt), yy, seg, md)
             if sol.status == 1:
                 # the terminal event that ended the run (the latest recorded one)
                 idx = max((te[-1], k) for k, te in enumerate(sol.t_events) if len(te))[1]
