@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ema_cli.config.acceptance import AcceptanceSpec
+from ema_cli.config.support import check_command
 from ema_cli.errors import EmaError
 
 Setup = tuple[dict[str, float], float]
@@ -30,6 +31,7 @@ def test_setups(sp: AcceptanceSpec, names: Sequence[str],
     def resolved(extra: list[tuple[str, Any]], where: str) -> tuple[dict[str, float], float]:
         try:
             cfg = load_config(act_source, base_pairs + extra, StudyConfig)
+            check_command(cfg, "acceptance")
         except EmaError as exc:
             raise EmaError(f"{where}: {exc}") from None
         run = resolve_run(cfg, act_dir)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
+from ema_cli.config.support import check_command, checked
 from ema_cli.errors import EmaError
 
 if TYPE_CHECKING:
@@ -217,6 +218,7 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
                        "points")
     pairs = override_pairs(overrides, nl)
     cfg = load_config(config, pairs, StudyConfig)
+    check_command(cfg, "freqresp")
     params = resolve_run(cfg, base_dir(config)).params
     f = np.geomspace(f_min_hz, f_max_hz, n)
     dt = cfg.simulation.dt_s
@@ -254,5 +256,5 @@ def freqresp_inputs(config: ConfigSource = None, overrides: Overrides = None, *,
     from ema_cli.config.study import StudyConfig
 
     pairs = override_pairs(overrides, nl)
-    return _inputs(load_config(config, pairs, StudyConfig), pairs,
+    return _inputs(checked(load_config(config, pairs, StudyConfig), "freqresp"), pairs,
                    amplitude_list(amplitudes_deg), f_min_hz, f_max_hz, n)

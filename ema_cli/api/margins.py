@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
+from ema_cli.config.support import check_command, checked
 
 if TYPE_CHECKING:
     import numpy as np
@@ -106,6 +107,7 @@ def margins(config: ConfigSource = None, overrides: Overrides = None) -> LoopMar
 
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    check_command(cfg, "margins")
     params = resolve_run(cfg, base_dir(config)).params
     notes = []
     if params["Ts"] > 0:
@@ -128,4 +130,4 @@ def margins_inputs(config: ConfigSource = None, overrides: Overrides = None) -> 
     from ema_cli.report.run_inputs import run_inputs
 
     pairs = override_pairs(overrides)
-    return run_inputs(load_config(config, pairs, StudyConfig), sets=pairs)
+    return run_inputs(checked(load_config(config, pairs, StudyConfig), "margins"), sets=pairs)

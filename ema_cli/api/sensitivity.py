@@ -213,6 +213,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     number_arg(n, "n", low=1, integer=True)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, SensitivityConfig)
+    from ema_cli.config.support import check_command
+
+    check_command(cfg, "sensitivity")
     check_sensitivity_steps(cfg, method, n, source_name(config))
     n_jobs = capped_jobs(n_jobs, cfg, backend)
     res = run_sensitivity(cfg, folder_arg(out), method, n, n_jobs=n_jobs, backend=backend,

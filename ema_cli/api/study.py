@@ -206,6 +206,7 @@ def plan(config: ConfigSource, overrides: Overrides = None) -> Plan:
 
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    _check(cfg)
     return plan_sweep(cfg, base_dir(config), source_name(config))
 
 
@@ -232,6 +233,7 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
     _parallel_args(n_jobs, backend, force, progress, cache_dir)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    _check(cfg)
     check_sweep_steps(cfg, source_name(config))
     n_jobs = capped_jobs(n_jobs, cfg, backend)
     res = run_sweep(cfg, folder_arg(out), n_jobs, backend, force, progress,
@@ -240,3 +242,10 @@ def sweep(config: ConfigSource, overrides: Overrides = None, *, n_jobs: int | No
                     base_dir=base_dir(config), source=source_name(config), overrides=pairs,
                     write=write or out is not None, figures=figures)
     return Sweep(res, pairs)
+
+
+def _check(cfg: Any) -> None:
+    """Refuse an actuator description a sweep cannot run (``config.support``)."""
+    from ema_cli.config.support import check_command
+
+    check_command(cfg, "sweep")

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ema_cli.api._inputs import ConfigSource, Overrides, base_dir, folder_arg, override_pairs
+from ema_cli.config.support import check_command, checked
 from ema_cli.errors import EmaError
 
 if TYPE_CHECKING:
@@ -171,6 +172,7 @@ def threshold(
     pl = lookup(vary)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, StudyConfig)
+    check_command(cfg, "threshold")
     inputs = _inputs(cfg, pairs, **raw)
     from ema_cli.model.nonlinearities import nonlinearity_updates
     from ema_cli.model.params import resolve
@@ -212,6 +214,7 @@ def threshold_inputs(config: ConfigSource, vary: str, range: tuple[float, float]
     from ema_cli.config.study import StudyConfig
 
     pairs = override_pairs(overrides)
-    return _inputs(load_config(config, pairs, StudyConfig), pairs, vary=vary, range=range,
+    cfg = checked(load_config(config, pairs, StudyConfig), "threshold")
+    return _inputs(cfg, pairs, vary=vary, range=range,
                    metric=metric, limit=limit, require=require, direction=direction, log=log,
                    rtol=rtol)

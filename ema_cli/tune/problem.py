@@ -31,6 +31,7 @@ import numpy as np
 from ema_cli.analysis.linear import LINEAR_PARAMS, closed_loop_stable, margins
 from ema_cli.config.loader import dotted_pairs, load_config, read_yaml, resolve_run
 from ema_cli.config.run import RunConfig
+from ema_cli.config.support import check_command
 from ema_cli.config.tune import TuneConfig
 from ema_cli.errors import EmaError
 from ema_cli.model.params import CONTROLLER_PARAMS, INDEX, PARAMS, resolve, to_row
@@ -128,7 +129,7 @@ def build_scenarios(cfg: TuneConfig, base_dir: Path | None
     src, act_dir = cfg.actuator.source(base_dir, "tuning config")
     if src is not None:  # the schema of `ema simulate`: an unknown key is named, never dropped
         try:
-            load_config(src, [], StudyConfig)
+            check_command(load_config(src, [], StudyConfig), "tune")
         except EmaError as exc:
             raise EmaError(f"actuator.config: {exc}") from None
     act_data: dict[str, Any] = read_yaml(src) if src is not None else {}

@@ -240,8 +240,8 @@ class Reference:
                 raise UnsupportedCase(f"{site} = {g(site)}: only off or static")
         if g("drive") == DRIVE_ARMATURE and math.isfinite(g("sat3")):
             raise UnsupportedCase("armature drive needs sat3 = off")
-        if g("ctrl") == CTRL_PAPER and g("Ts") != 0:
-            raise UnsupportedCase("only the continuous paper cascade (Ts = 0)")
+        if g("ctrl") == CTRL_PAPER and (g("Ts") != 0 or g("q_pos") != 0):
+            raise UnsupportedCase("only the continuous paper cascade (Ts = 0, q_pos = 0)")
 
     # -------------------------------------------------------- algebra
 
