@@ -582,7 +582,8 @@ def test_disturbance_held(i):
 
 
 # ---------------------------------------------------------------- the reference on its own
-# closed forms and hand-written recurrences: the reference must be right by itself
+# closed forms and hand-written recurrences: the reference must be right by itself (to 1e-10 of
+# each range: the dense output's interpolation at rtol 1e-12; the comparisons need 1e-6)
 
 
 def _force_run(over: dict, force: float, t: np.ndarray, **sig) -> dict:
@@ -606,9 +607,9 @@ def test_reference_mass_with_force_and_viscous_friction():
         r = _force_run(over, F, t)
         v = (F - fc) / b * (1 - np.exp(-b * t / M))
         x = (F - fc) / b * (t - M / b * (1 - np.exp(-b * t / M)))
-        np.testing.assert_allclose(r["omega_load"], v, rtol=0, atol=1e-12 * v.max())
-        np.testing.assert_allclose(r["theta_load"], x, rtol=0, atol=1e-12 * x.max())
-        np.testing.assert_allclose(r["omega_motor"], m * v, rtol=0, atol=1e-12 * m * v.max())
+        np.testing.assert_allclose(r["omega_load"], v, rtol=0, atol=1e-10 * v.max())
+        np.testing.assert_allclose(r["theta_load"], x, rtol=0, atol=1e-10 * x.max())
+        np.testing.assert_allclose(r["omega_motor"], m * v, rtol=0, atol=1e-10 * m * v.max())
         np.testing.assert_allclose(r["friction_total"][1:], fc + 0 * t[1:], atol=1e-12)
 
 
@@ -626,7 +627,7 @@ def test_reference_sticks_inside_the_band_and_slips_outside():
     for f, fc, fv in ((3.01, 2.5, 0.5), (-2.01, -1.2, 0.8)):
         r = _force_run(over, f, t)
         v = (f - fc) / (b + fv) * (1 - np.exp(-(b + fv) * t / M))
-        np.testing.assert_allclose(r["omega_load"], v, rtol=0, atol=1e-12 * abs(v).max())
+        np.testing.assert_allclose(r["omega_load"], v, rtol=0, atol=1e-10 * abs(v).max())
         assert not r.stuck["rigid"][1:].any()
 
 
@@ -643,8 +644,8 @@ def test_reference_stops_at_the_closed_form_instant_and_sticks():
     v = np.where(t < tstar, (v0 + fc / b) * np.exp(-b * t / M) - fc / b, 0.0)
     tc = np.minimum(t, tstar)
     x = M / b * (v0 + fc / b) * (1 - np.exp(-b * tc / M)) - fc / b * tc
-    np.testing.assert_allclose(r["omega_load"], v, rtol=0, atol=1e-12 * v0)
-    np.testing.assert_allclose(r["theta_load"], x, rtol=0, atol=1e-12 * x.max())
+    np.testing.assert_allclose(r["omega_load"], v, rtol=0, atol=1e-10 * v0)
+    np.testing.assert_allclose(r["theta_load"], x, rtol=0, atol=1e-10 * x.max())
     assert np.all(r["omega_load"][t > tstar] == 0) and np.all(r["omega_load"][t < tstar] > 0)
     assert r.stuck["rigid"][t > tstar].all()
 
@@ -661,7 +662,7 @@ def test_reference_amplifier_first_order_step_and_limit():
         r = simulate(p, sig, t)
         fstar = min(max(gain * u, -limit), limit)
         f = np.where(t >= t0, fstar * (1 - np.exp(-(t - t0) / tau)), 0.0)
-        np.testing.assert_allclose(r["drive_force"], f, rtol=0, atol=1e-12 * abs(fstar))
+        np.testing.assert_allclose(r["drive_force"], f, rtol=0, atol=1e-10 * abs(fstar))
         np.testing.assert_array_equal(r["voltage_cmd"], np.where(t >= t0, u, 0.0))
 
 
@@ -687,23 +688,29 @@ def test_reference_compliant_paper_cascade_is_the_linear_model():
                                atol=1e-9 * np.ptp(x[:, 0] / p["m"]))
 
 
-def test_reference_rigid_armature_is_the_linear_model():
-    # rigid axis, armature, constant voltage U: states [i, w_L] with L i' = U - R i - Ke m w_L,
-    # M w_L' = m Kt i - (bL + m^2 bm) w_L
+def _rigid_armature_exact(p: dict, volts: float, t: np.ndarray) -> np.ndarray:
+    """Rigid axis, armature, constant voltage U from rest: states [i, w_L] with
+    L i' = U - R i - Ke m w_L, M w_L' = m Kt i - (bL + m^2 bm) w_L, by the matrix exponential."""
     from scipy.linalg import expm
 
-    p = resolve(dict(rigid=1, drive="armature", sat3="off", ctrl="none", plant_input="command",
-                     m=24.0, JL=0.01, bL=0.02, bm=2e-5))
     m, M = p["m"], p["JL"] + p["m"] ** 2 * p["Jm"]
     A = np.array([[-p["R"] / p["L"], -p["Ke"] * m / p["L"]],
                   [m * p["Kt"] / M, -(p["bL"] + m * m * p["bm"]) / M]])
-    U = 10.0
     aug = np.zeros((3, 3))
-    aug[:2, :2], aug[0, 2] = A, U / p["L"]
+    aug[:2, :2], aug[0, 2] = A, volts / p["L"]
+    return np.array([expm(aug * tk)[:2, 2] for tk in t])
+
+
+RIGID_ARMATURE = dict(rigid=1, drive="armature", sat3="off", ctrl="none",
+                      plant_input="command", m=24.0, JL=0.01, bL=0.02)
+VOLTS = InputSignal("step", amplitude=0.0, ext_table=((0.0, 1.0), (10.0, 10.0)), ext_hold=False)
+
+
+def test_reference_rigid_armature_is_the_linear_model():
+    p = resolve(dict(RIGID_ARMATURE, bm=2e-5))
     t = np.linspace(0.0, 0.02, 81)
-    x = np.array([expm(aug * tk)[:2, 2] for tk in t])
-    r = simulate(p, InputSignal("step", amplitude=0.0, ext_table=((0.0, 1.0), (U, U)),
-                                ext_hold=False), t)
+    x = _rigid_armature_exact(p, 10.0, t)
+    r = simulate(p, VOLTS, t)
     np.testing.assert_allclose(r["current"], x[:, 0], rtol=0, atol=1e-10 * np.ptp(x[:, 0]))
     np.testing.assert_allclose(r["omega_load"], x[:, 1], rtol=0, atol=1e-10 * np.ptp(x[:, 1]))
 
@@ -749,9 +756,9 @@ def test_reference_discrete_cascade_by_hand():
         x, v = x + v * ts + acc * ts * ts / 2, v + acc * ts
     t = np.arange(K) * ts
     res = simulate(p, InputSignal("step", amplitude=0.01, start=0.0), t)
-    np.testing.assert_allclose(res["theta_load"], qs, rtol=0, atol=1e-12 * np.ptp(qs))
+    np.testing.assert_allclose(res["theta_load"], qs, rtol=0, atol=1e-10 * np.ptp(qs))
     applied = [us[k - d] if k >= d else 0.0 for k in range(K)]
-    np.testing.assert_allclose(res["voltage_cmd"], applied, rtol=0, atol=1e-12 * umax)
+    np.testing.assert_allclose(res["voltage_cmd"], applied, rtol=0, atol=1e-10 * umax)
     assert max(abs(np.array(us))) == umax  # the limits were exercised
 
 
@@ -771,6 +778,19 @@ def test_rigid_motor_viscous_minimal():
     T, M, b = steps * dt, 12.8, 4.6
     exact = 300.0 / b * (1 - math.exp(-b * T / M))  # 0.022884167734952...
     assert abs(res.signal("omega_load")[1] - exact) <= 1e-9 * exact  # kernel: 0.0228842168...
+
+
+@pytest.mark.xfail(strict=True, reason=STALE_MOTOR_SPEED)
+def test_rigid_back_emf_minimal():
+    # rigid axis, armature (paper values, bm = 0), 10 V from rest, 20 ms at dt = 2^-16 s: the
+    # kernel's load speed is 9e-4 of its range off the matrix exponential (current 1.6e-3)
+    p = resolve(dict(RIGID_ARMATURE, bm=0.0))
+    steps, dec = 1280, 64
+    res = simulate_batch(np.array([to_row(p)]), [VOLTS], None, DT, steps, dec)
+    x = _rigid_armature_exact(p, 10.0, res.t_out)
+    for k, name in ((0, "current"), (1, "omega_load")):
+        err = np.abs(res.signal(name) - x[:, k]).max() / np.ptp(x[:, k])
+        assert err <= TOL, f"{name}: {err:.3g} of its range"
 
 
 @pytest.mark.xfail(strict=True, reason=HELD_INPUT)
