@@ -204,6 +204,8 @@ PARAMS: tuple[Param, ...] = (
           f"after it is computed (0..{MAX_DELAY}; discrete cascade)"),
     Param("dist_out", "-", 0.0, "the run's input signal is a disturbance added to the "
           "controller output (after its limit and delay): 0 no, 1 yes"),
+    Param("ext_hold", "-", 0.0, "the input signal is held between its samples (1: a logged DAC "
+          "output, constant over each step) or interpolated (0); set from the run's input"),
     Param("plant_input", "-", 0.0, "controller none: the input signal is the drive command "
           "(command), the force (torque) on the load (force) or the armature current (current)",
           choices=PLANT_INPUT_CHOICES),
@@ -213,7 +215,7 @@ PARAMS: tuple[Param, ...] = (
 )
 INITIAL_STATE = tuple(f"x0_{st.name}" for st in STATES)
 """The initial-state parameters, in the order of ``model.states.STATES``."""
-FLAGS = ("locked", "rigid", "dist_out")
+FLAGS = ("locked", "rigid", "dist_out", "ext_hold")
 CONTROLLER_PARAMS = ("Kpp", "Kps", "Kis", "fb_motor", "dzi_v", "dzi_band", "ff_fc", "ff_fs",
                      "ff_vs", "ff_sigma2", "ff_sigma0", "ff_sigma1", "ff_band", "notch_hz",
                      "notch_depth", "notch_zeta")

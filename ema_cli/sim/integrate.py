@@ -38,6 +38,8 @@ def _stage_rates(x, r, lprof, ext, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl
     """The state equations' rates at one RK4 stage (``sim.layout.rates``: every ``rk4`` state of
     ``model.states.STATES``, its arguments bound by name to the state, the algebra, the lane's
     parameters and the variant's flags)."""
+    if fl.rigid:  # the motor follows the load at every stage (its own rates are held)
+        x = motor_follows(x, lp)
     th_meas, w_meas, e_w, u_unsat, u_dem, u_pre = controller_nb(x, r, lp, fl, xn2, tfh)
     u_sel = command_nb(u_dem, uh, disc, ext, lp, fl)
     u_cmd, u_amp = amplifier_input_nb(u_sel, lp, fl, False)
@@ -106,6 +108,8 @@ def _other_force(x, s, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck
     r = _quad(inp.r0, inp.r1, inp.r2, s)
     lprof = _quad(inp.l0, inp.l1, inp.l2, s)
     ext = _quad(inp.e0, inp.e1, inp.e2, s)
+    if fl.rigid:
+        x = motor_follows(x, lp)
     th_meas, w_meas, e_w, u_unsat, u_dem, u_pre = controller_nb(x, r, lp, fl, xn2, tfh)
     u_sel = command_nb(u_dem, uh, disc, ext, lp, fl)
     u_amp = amplifier_input_nb(u_sel, lp, fl, False)[1]
@@ -235,6 +239,12 @@ def hybrid_advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stu
         if s0 >= 1.0:
             return x, stuck_m, dir_m, stuck_l, dir_l
     return x, stuck_m, dir_m, stuck_l, dir_l
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def motor_follows(x, lp):
+    """A rigid axis's state with the motor's angle and speed ``m`` times the load's."""
+    return layout.set_w_m(layout.set_theta_m(x, lp.m * x.theta_L), lp.m * x.w_L)
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")

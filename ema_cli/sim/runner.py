@@ -315,6 +315,10 @@ def simulate_batch(
     # exponent, the paper cascade's extras, the actuator's structure): each variant's rows are
     # run by that variant's entry point (compiled the first time it is needed), in chunks of
     # their own; each row writes its results straight into its own row of sig and met
+    if with_ext:  # each row's input signal held or interpolated (the kernel's ext_hold)
+        hold = np.array([bool(s.ext_hold) for s in sources])
+        P = P.copy()
+        P[:, INDEX["ext_hold"]] = hold[ref_index].astype(np.float64)
     order = variant_order(P)
     codes = variant_codes(P[order])  # sorted: each variant's rows contiguous
     check_inputs(codes, with_ext)

@@ -188,6 +188,7 @@ class Reference:
     step_info: np.ndarray
     load_half: np.ndarray | None = None
     ext_half: np.ndarray | None = None
+    ext_hold: bool = True
 
 
 SCAN_STEPS = 2**16  # steps per block when a whole run's grid is scanned [steps]
@@ -243,6 +244,11 @@ class Sampler:
     @property
     def has_ext(self) -> bool:
         return self._ext is not None
+
+    @property
+    def ext_hold(self) -> bool:
+        """Whether the input signal is held between its samples (else interpolated)."""
+        return self.signal.ext_hold
 
     def ext_chunk(self, k0: int, k1: int) -> np.ndarray | None:
         """The input signal at the half steps of steps ``k0 <= k < k1`` (as :meth:`chunk`), or
@@ -335,6 +341,7 @@ class _Presampled:
         self.step_info = ref.step_info
         self.has_load = ref.load_half is not None
         self.has_ext = ref.ext_half is not None
+        self.ext_hold = ref.ext_hold
 
     def ext_chunk(self, k0: int, k1: int) -> np.ndarray | None:
         ext = self.ref.ext_half
@@ -364,7 +371,7 @@ def sample(sig: InputSignal, dt: float, n_steps: int) -> Reference:
     full steps for velocity). The kernel itself samples in time chunks (:func:`sampler`)."""
     s = Sampler(sig, dt, n_steps)
     pos, vel, load = s.chunk(0, n_steps + 1)
-    return Reference(pos, vel, s.step_info, load, s.ext_chunk(0, n_steps + 1))
+    return Reference(pos, vel, s.step_info, load, s.ext_chunk(0, n_steps + 1), sig.ext_hold)
 
 
 HOLD_TOL = 1e-3  # a table instant this close (fraction of its median spacing) to a time is on it

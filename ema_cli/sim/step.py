@@ -32,7 +32,7 @@ from ema_cli.model.discrete import BUFFER, discrete_sample_nb, filter_coefficien
 from ema_cli.model.lugre import bristle_step_nb
 from ema_cli.model.params import INDEX, INITIAL_STATE, N_PARAMS
 from ema_cli.sim import layout
-from ema_cli.sim.integrate import hybrid_advance, rk4, site_on
+from ema_cli.sim.integrate import hybrid_advance, motor_follows, rk4, site_on
 from ema_cli.sim.layout import (
     START,
     Out,
@@ -80,6 +80,9 @@ def step_nb(x, acc, mem, inp, lp, k, dt, n_steps, in_ss, in_osc, variant, dsc):
     Returns (x+, acc+, mem+, Out at t_k).
     """
     fl = flags_nb(variant)
+    if fl.ext and lp.ext_hold:  # a held input is constant over the step: its value after t_k
+        inp = layout.Inp(inp.r0, inp.r1, inp.r2, inp.rv, inp.l0, inp.l1, inp.l2, inp.e1,
+                         inp.e1, inp.e1)
     extras = fl.extras
     ns = lp.ns if extras else 0.0  # no digital controller (a constant at each call site)
     delta = 1.0 if fl.fric_m == FRIC_LUGRE1 else lp.delta  # every lane's exponent (pow_nb folds)
@@ -172,7 +175,7 @@ def step_nb(x, acc, mem, inp, lp, k, dt, n_steps, in_ss, in_osc, variant, dsc):
     if not fl.amp:
         xn = layout.set_i(xn, min(max(xn.i, -lp.sat3), lp.sat3))
     if fl.rigid:  # the motor follows the load
-        xn = layout.set_w_m(layout.set_theta_m(xn, lp.m * xn.theta_L), lp.m * xn.w_L)
+        xn = motor_follows(xn, lp)
     ok = (abs(xn.w_m) < W_RUNAWAY and abs(xn.theta_L) < THETA_RUNAWAY
           and abs(xn.i) < I_RUNAWAY and abs(xn.theta_m) < _INF and abs(xn.w_L) < _INF
           and abs(xn.xI) < _INF and abs(z_new) < _INF

@@ -12,17 +12,18 @@ dt^4, 1e-9 of the range or less where the kernel's integration is smooth; a limi
 inside a kernel step costs it O(dt^2..3), 2e-7 at 2^-16 s, so the amplifier element runs at
 2^-17 s).
 
-Kernel discrepancies found (tests marked ``xfail(strict=True)``, see their reasons):
+Two kernel errors this reference found, fixed since (their minimal cases stay as tests):
 
-* rigid axis: the motor-speed terms (motor viscous ``bm*w_m`` and back-EMF ``Ke*w_m``) lag: they
-  use the motor speed of the step's start in every RK4 stage, an error of order ``dt``;
-* a held input signal (``ext_hold``): it is sampled at the RK4 stages' instants, so the last
-  stage of the step that ends at a sample's instant already sees the new sample (weight 1/6;
-  5/6 when dt/2 < ~1 us: the lookup takes a sample ~1 us early), an error of order ``dt``.
+* rigid axis: the motor-speed terms (motor viscous ``bm*w_m`` and back-EMF ``Ke*w_m``) used
+  the motor speed of the step's start in every RK4 stage (first order in ``dt``): the motor now
+  follows the load at every stage (``sim.integrate.motor_follows``);
+* a held input signal (``ext_hold``) was sampled at the RK4 stages' instants, so the last stage
+  of the step ending at a sample's instant already saw the new sample: a held input is now
+  constant over each step, its value after the step's start.
 
-To validate the other elements on a rigid axis despite the first, their rigid descriptions put
-all the viscous damping on the load (``bm = 0``) and drive with a force (amplifier or force
-input); their input signals are interpolated (``ext_hold=False``) except in the held test.
+The other elements' rigid descriptions put the viscous damping on the load (``bm = 0``) and
+drive with a force (amplifier or force input), and their input signals are interpolated
+(``ext_hold=False``) except in the held test, as when the two errors were open.
 """
 
 from __future__ import annotations
@@ -518,18 +519,6 @@ def check(name: str, i: int) -> None:
 
 
 CASES = range(N_CASES)
-STALE_MOTOR_SPEED = (
-    "kernel bug: on the rigid axis the motor-speed terms (motor viscous bm*w_m and back-EMF "
-    "Ke*w_m, w_m = m*w_L) use the motor speed of the RK4 step's start in every stage: an error "
-    "of order dt (halves when dt halves), e.g. 2e-6 of the speed range at dt = 2^-16 s with "
-    "m^2*bm = 3.6 N*s/m, 9e-4 of the speed range with the armature's back-EMF")
-HELD_INPUT = (
-    "kernel bug: a held input signal (ext_hold=True) is sampled at the RK4 stages' instants, so "
-    "in the step ending at a sample's instant the last stage already uses the new sample (its "
-    "effect starts dt/6 early, weighted): an error of order dt per sample")
-
-
-@pytest.mark.xfail(strict=True, reason=STALE_MOTOR_SPEED)
 @pytest.mark.parametrize("i", CASES)
 def test_rigid_axis(i):
     check("rigid_axis", i)
@@ -575,7 +564,6 @@ def test_disturbance_interpolated(i):
     check("disturbance", i)
 
 
-@pytest.mark.xfail(strict=True, reason=HELD_INPUT)
 @pytest.mark.parametrize("i", CASES)
 def test_disturbance_held(i):
     check("disturbance_held", i)
@@ -765,7 +753,6 @@ def test_reference_discrete_cascade_by_hand():
 # ---------------------------------------------------------------- minimal reproductions
 
 
-@pytest.mark.xfail(strict=True, reason=STALE_MOTOR_SPEED)
 def test_rigid_motor_viscous_minimal():
     # rigid axis, 300 N from rest, m = 600 rad/m, Jm = 3e-5, JL = 2 kg, bL = 1, bm = 1e-5:
     # M = 12.8 kg, b = 4.6 N*s/m, v(T) = F/b (1 - e^{-bT/M}) at T = 2^-10 s (64 steps)
@@ -780,7 +767,6 @@ def test_rigid_motor_viscous_minimal():
     assert abs(res.signal("omega_load")[1] - exact) <= 1e-9 * exact  # kernel: 0.0228842168...
 
 
-@pytest.mark.xfail(strict=True, reason=STALE_MOTOR_SPEED)
 def test_rigid_back_emf_minimal():
     # rigid axis, armature (paper values, bm = 0), 10 V from rest, 20 ms at dt = 2^-16 s: the
     # kernel's load speed is 9e-4 of its range off the matrix exponential (current 1.6e-3)
@@ -793,7 +779,6 @@ def test_rigid_back_emf_minimal():
         assert err <= TOL, f"{name}: {err:.3g} of its range"
 
 
-@pytest.mark.xfail(strict=True, reason=HELD_INPUT)
 def test_held_input_minimal():
     # a held force 0 -> 1 N at t = 2^-10 s on a free 1 kg mass: at rest until then
     over = dict(rigid=1, drive="amplifier", ctrl="none", plant_input="force", m=1.0,
