@@ -17,8 +17,6 @@ import statistics
 import time
 from pathlib import Path
 
-import numpy as np
-
 from ema_cli.api import simulate
 from ema_cli.identify.plant.benchmark import (
     EMPS_SIMULATION_PUBLISHED_PCT,
