@@ -75,14 +75,18 @@ class Task:
 
 @dataclass(frozen=True)
 class Failure:
-    """A block that failed :data:`MAX_ATTEMPTS` times: its label and the last error."""
+    """A block that failed :data:`MAX_ATTEMPTS` times: its label, the last error and how
+    many workers were lost while running it."""
 
     label: str
     error: str
+    lost: int = 0
 
     @property
     def message(self) -> str:
-        return f"{self.label}: failed {MAX_ATTEMPTS} times, last: {self.error}"
+        lost = f" ({self.lost} worker{'s' if self.lost != 1 else ''} lost while it ran)" if (
+            self.lost) else ""
+        return f"{self.label}: failed {MAX_ATTEMPTS} times{lost}, last: {self.error}"
 
 
 class BlockFailed(EmaError):
@@ -214,6 +218,12 @@ class Executor:
                 self._client.close()
             self._client = None
 
+    def describe(self) -> dict[str, Any]:
+        """Where the work ran, for a manifest: backend, workers, scheduler, the blocks run
+        again (``retries``: block and why)."""
+        return {"backend": self.backend, "workers": self.workers, "scheduler": self.scheduler,
+                "retries": [{"block": b, "why": w} for b, w in self.retries]}
+
     @property
     def remote(self) -> bool:
         """True when tasks run outside this process (loky, dask)."""
@@ -250,7 +260,7 @@ class Executor:
             for key in keys:
                 if key in self._labels:
                     self.retries.append((self._labels[key],
-                                         f"dask worker {msg.get('worker', '?')} lost"))
+                                         f"{LOST}: dask worker {msg.get('worker', '?')}"))
 
     def run_on_workers(self, fn: Callable[..., Any], *args: Any) -> None:
         """Run ``fn(*args)`` once on every Dask worker (e.g. load the kernel); nothing on the
@@ -325,12 +335,17 @@ class Executor:
                         raise value
                     elif attempts[i] < MAX_ATTEMPTS:
                         attempts[i] += 1
-                        with self._lock:
-                            self.retries.append((task.label, _describe(value)))
+                        if not _killed_worker(value):  # else the scheduler's event told it
+                            with self._lock:
+                                self.retries.append((task.label, _describe(value)))
                         pool.submit(i, task)
                         continue
                     else:
-                        fail = Failure(task.label, _describe(value))
+                        why = _describe(value)
+                        with self._lock:  # the losses retried, and this one
+                            lost = sum(1 for b, w in self.retries if b == task.label
+                                       and w.startswith(LOST)) + why.startswith(LOST)
+                        fail = Failure(task.label, why, lost)
                         if failures == "raise":
                             raise BlockFailed(fail)
                         held[i], seconds[i] = fail, 0.0
@@ -347,10 +362,26 @@ class Executor:
             pool.cancel()
 
 
+LOST = "worker lost"  # how a retry after a lost worker starts [-]
+
+
+def _killed_worker(exc: BaseException) -> bool:
+    """True for Dask's KilledWorker: the scheduler gave a block up after losing workers."""
+    return type(exc).__name__ == "KilledWorker"
+
+
 def _describe(exc: BaseException) -> str:
-    """One line: the exception's type and message."""
+    """One line: the exception's type and message (a worker process that died: its exit
+    code)."""
+    name = type(exc).__name__
+    if name in ("TerminatedWorkerError", "BrokenProcessPool"):
+        codes = re.search(r"exit codes of the workers are (\{[^}]*\})", str(exc))
+        return f"{LOST}: a worker process died" + (f" (exit {codes.group(1)})" if codes
+                                                    else "")
+    if _killed_worker(exc):
+        return "KilledWorker: the scheduler gave it up after losing the workers running it"
     text = " ".join(str(exc).split())[:300]
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    return f"{name}: {text}" if text else name
 
 
 class _LokyPool:
