@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from ema_cli.cli.common import (
+    SchedulerOpt,
     check_number,
     console,
     err_console,
@@ -134,7 +135,8 @@ def identify_cmd(
     runs: Annotated[int | None, typer.Option(
         "--runs", help="GA runs with seeds SeedSequence(seed).spawn(N) (default 1).")] = None,
     n_jobs: Annotated[int | None, typer.Option(
-        "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1)."
+        "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1); "
+                         "with --closed-loop the workers of --backend (default all cores)."
     )] = None,
     data: Annotated[Path | None, typer.Option(
         "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
@@ -174,6 +176,11 @@ def identify_cmd(
     make_data: MakeDataOpt = None,
     starts: StartsOpt = None,
     free: FreeOpt = None,
+    backend: Annotated[str | None, typer.Option(
+        "--backend", help="--closed-loop: where the starts run: threads (this process; the "
+                          "default) | loky (worker processes) | dask (a cluster: --scheduler); "
+                          "the same results bit for bit.")] = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Identify kL and alpha (and c) from transmission torque data by minimising the paper's
     Eq. 8, J = sum (T_meas - T_model)^2, with a GA, beside the exact least-squares optimum.
@@ -187,15 +194,19 @@ def identify_cmd(
 
         torque_only = {"--k-range": k_range, "--alpha-range": alpha_range, "--c-range": c_range,
                        "--method": method if not closed_loop else None, "--runs": runs,
-                       "--n-jobs": n_jobs,
+                       "--n-jobs": n_jobs if not closed_loop else None,
                        "--damping": damping, "--model": model, "--c": c,
                        "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits}
         run_log_mode(modes, config=config, data=data, noise=noise, seed=seed, pop=pop,
                      generations=generations, set_=set_, out=out, free=free,
                      make_data=make_data, columns=columns, window=window,
                      method=method if closed_loop else None, starts=starts,
-                     torque_only=[k for k, v in torque_only.items() if v is not None])
+                     torque_only=[k for k, v in torque_only.items() if v is not None],
+                     execution=(backend, n_jobs if closed_loop else None, scheduler))
         return
+    if backend is not None or scheduler is not None:
+        raise EmaError("--backend and --scheduler apply to --closed-loop (its starts); the "
+                       "torque-data identification runs its GA runs in processes (--n-jobs)")
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")

@@ -17,6 +17,7 @@ import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -177,3 +178,38 @@ def execute(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: in
                 out = ChunkOutput(None, None, 0.0, out.message)
             on_chunk(i, out)
         return ex.retries
+
+
+MIN_BLOCK_CASE_STEPS = 10_000_000
+"""Fewest cases x steps in one block of a batch cut over remote workers (:func:`spread_batch`):
+about 0.2 s of kernel on one core at ``progress.CPU_S_PER_STEP``, against the Dask round trip
+of a block (``make bench``: experiments/bench_scale.py measures it)."""
+
+
+def batch_task(P: np.ndarray, refs: Sequence[Any], ref_index: np.ndarray, dt: float,
+               n_steps: int, dec: int) -> Any:
+    """Worker side of :func:`spread_batch`: one kernel call (numba's threads as the executor
+    set them)."""
+    return simulate_batch(P, refs, ref_index, dt, n_steps, dec, parallel=True)
+
+
+def spread_batch(P: np.ndarray, refs: Sequence[Any], ref_index: np.ndarray, dt: float,
+                 n_steps: int, what: str = "rows") -> Any:
+    """``simulate_batch(P, refs, ref_index, dt, n_steps)`` (metrics only) on the current
+    executor (``sweep.executor.current``): in this process one batched call; on remote workers
+    the rows cut into one block per worker (each at least :data:`MIN_BLOCK_CASE_STEPS`),
+    merged back in row order -> a ``BatchResult`` with the same bits (``kernel_s`` summed
+    over the blocks). ``what`` names the rows in a block's label."""
+    from ema_cli.sim.runner import BatchResult
+    from ema_cli.sweep.executor import current, split
+
+    ex = current()
+    bounds = split(P.shape[0], math.ceil(MIN_BLOCK_CASE_STEPS / max(n_steps, 1)))
+    if not ex.remote or len(bounds) < 2:
+        return simulate_batch(P, refs, ref_index, dt, n_steps, 0, parallel=True)
+    parts = ex.run(Task(batch_task, (P[a:b], refs, ref_index[a:b], dt, n_steps, 0),
+                        f"{what} {a}-{b - 1}") for a, b in bounds)
+    first = parts[0]
+    return BatchResult(P, np.concatenate([p.metrics for p in parts]), None, first.t_out,
+                       first.dt, first.n_steps, 0, sum(p.kernel_s for p in parts),
+                       sum(p.load_s for p in parts))

@@ -191,6 +191,7 @@ class Executor:
         self.scheduler = scheduler
         self.retries: list[tuple[str, str]] = []
         self.task_seconds: list[float] = []
+        self.blocks = 0  # blocks finished, every map of this executor
         self._client: Any = None
         self._labels: dict[str, str] = {}  # dask key -> label, of the blocks in flight
         self._lock = threading.Lock()
@@ -222,6 +223,7 @@ class Executor:
         """Where the work ran, for a manifest: backend, workers, scheduler, the blocks run
         again (``retries``: block and why)."""
         return {"backend": self.backend, "workers": self.workers, "scheduler": self.scheduler,
+                "blocks": self.blocks,
                 "retries": [{"block": b, "why": w} for b, w in self.retries]}
 
     @property
@@ -302,6 +304,7 @@ class Executor:
             finally:
                 numba.set_num_threads(previous)
             self.task_seconds.append(time.perf_counter() - t0)
+            self.blocks += 1
             yield i, value
 
     def _remote(self, tasks: Iterator[Task], ordered: bool, failures: str
@@ -352,10 +355,12 @@ class Executor:
                     if not ordered:
                         del given[i]
                         self.task_seconds.append(seconds.pop(i))
+                        self.blocks += 1
                         yield i, held.pop(i)
                 while ordered and nxt in held:
                     del given[nxt]
                     self.task_seconds.append(seconds.pop(nxt))
+                    self.blocks += 1
                     yield nxt, held.pop(nxt)
                     nxt += 1
         finally:
