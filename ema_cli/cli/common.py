@@ -194,7 +194,6 @@ def backend_options(backend: str | None, n_jobs: int | None, scheduler: str | No
                     ) -> int | None:
     """``--backend``, ``--n-jobs`` and ``--scheduler`` checked, naming the option ->
     ``--n-jobs`` to use (capped at the cores with a note, unless a cluster runs the work)."""
-    from ema_cli.cli.sweep import check_jobs
     from ema_cli.limits import BACKENDS
 
     if backend is not None and backend not in BACKENDS:
@@ -208,3 +207,16 @@ def print_retries(execution: dict[str, Any] | None) -> None:
     """One note per block that was run again (a lost worker), on stderr."""
     for r in (execution or {}).get("retries", []):
         err_console.print(f"note: {r['block']} run again ({r['why']})", highlight=False)
+
+
+def check_jobs(n_jobs: int | None, option: str, scheduler: str | None = None) -> int | None:
+    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS -> the count to use, capped at the
+    cores available (with a note) unless a cluster ``scheduler`` is given."""
+    from ema_cli.limits import MAX_WORKERS, cap_workers
+
+    if n_jobs is not None and n_jobs != -1:
+        check_number(n_jobs, option + " (-1: all cores)", low=1, high=MAX_WORKERS)
+    n_jobs, note = cap_workers(n_jobs, option, cluster=scheduler is not None)
+    if note:
+        err_console.print(f"note: {note}", highlight=False)
+    return n_jobs

@@ -88,6 +88,10 @@ FreeOpt = Annotated[list[str] | None, typer.Option(
     "--free", help="--closed-loop: free a parameter with bounds, NAME=LO,HI in SI (e.g. "
                    "Fs=0,0.2); repeatable; added to the default set kL, alpha, Fc, sigma2 "
                    "(a config's free: replaces it).")]
+StartsBackendOpt = Annotated[str | None, typer.Option(
+    "--backend", help="--closed-loop: where the starts run: threads (this process; the "
+                      "default) | loky (worker processes) | dask (a cluster: --scheduler); the "
+                      "same results bit for bit.")]
 StartsOpt = Annotated[int | None, typer.Option(
     "--starts", help="--closed-loop: starts of the multiple-shooting search (8).")]
 
@@ -176,10 +180,7 @@ def identify_cmd(
     make_data: MakeDataOpt = None,
     starts: StartsOpt = None,
     free: FreeOpt = None,
-    backend: Annotated[str | None, typer.Option(
-        "--backend", help="--closed-loop: where the starts run: threads (this process; the "
-                          "default) | loky (worker processes) | dask (a cluster: --scheduler); "
-                          "the same results bit for bit.")] = None,
+    backend: StartsBackendOpt = None,
     scheduler: SchedulerOpt = None,
 ) -> None:
     """Identify kL and alpha (and c) from transmission torque data by minimising the paper's
@@ -205,8 +206,8 @@ def identify_cmd(
                      execution=(backend, n_jobs if closed_loop else None, scheduler))
         return
     if backend is not None or scheduler is not None:
-        raise EmaError("--backend and --scheduler apply to --closed-loop (its starts); the "
-                       "torque-data identification runs its GA runs in processes (--n-jobs)")
+        raise EmaError("--backend and --scheduler apply to --closed-loop; the torque-data "
+                       "identification runs its GA runs in processes (--n-jobs)")
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")
@@ -214,16 +215,7 @@ def identify_cmd(
     from ema_cli.report.rundir import check_output
 
     check_output(out, "identify")  # a file, a folder of another command: refused at once
-
-    for value, option in ((k_range, "--k-range"), (alpha_range, "--alpha-range"),
-                          (c_range, "--c-range")):
-        for v in value or ():
-            check_number(v, option, low=0.0)
-    check_number(noise, "--noise", low=0.0)
-    check_number(c, "--c", low=0.0)
-    check_number(pc, "--pc", low=0.0, high=1.0)
-    check_number(pm, "--pm", low=0.0, high=1.0)
-    from ema_cli.cli.sweep import check_jobs
+    from ema_cli.cli.common import check_jobs
 
     n_jobs = check_jobs(n_jobs, "--n-jobs")  # capped at the cores available, with a note
     pairs = torque_pairs({

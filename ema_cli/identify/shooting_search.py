@@ -276,7 +276,7 @@ def search(problem: ClosedLoopProblem, *, n_starts: int, segment_s: float, dt: f
                 report(f"joint fit, round {k + 1} of {len(rounds)} (J = {best:.6g})",
                        offset + it, max_iter)
 
-        lm_spread(sp, st, dt, iters, prog)
+        lm_spread(lm_many, sp, st, dt, iters, prog)
         used += iters
         if keep > 0.0 and k < len(rounds) - 1:
             n_keep = max(2, int(round(keep * alive.size)))

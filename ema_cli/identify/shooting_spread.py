@@ -13,12 +13,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import fields
+from typing import Any
 
 import numpy as np
 
 from ema_cli.identify.shooting import ShootingProblem
-from ema_cli.identify.shooting_search import LMState, lm_many
 from ema_cli.identify.shooting_seat import start_states
+
+LM = Callable[..., Any]
+"""``shooting_search.lm_many`` (passed in: the search imports this module)."""
 
 Counters = tuple[int, int, float]
 """What a worker's runs add to the problem's counters: (evaluations, kernel steps, kernel s)."""
@@ -67,25 +70,25 @@ def start_states_spread(sp: ShootingProblem, X: np.ndarray, dt: float) -> np.nda
     return np.concatenate([v for v, _, _ in out])
 
 
-def _part(st: LMState, rows: np.ndarray) -> LMState:
-    """The starts ``rows`` of ``st`` as a state of their own (no history)."""
-    return LMState(**{f.name: ([] if f.name == "history" else getattr(st, f.name)[rows].copy())
-                      for f in fields(LMState)})
+def _part(st: Any, rows: np.ndarray) -> Any:
+    """The starts ``rows`` of the ``LMState`` ``st`` as a state of their own (no history)."""
+    return type(st)(**{f.name: ([] if f.name == "history" else getattr(st, f.name)[rows].copy())
+                       for f in fields(st)})
 
 
-def lm_task(sp: ShootingProblem, st: LMState, dt: float, iters: int
-            ) -> tuple[LMState, Counters, Counters]:
-    """Worker side: :func:`lm_many` on the starts of ``st`` -> the state and the counters."""
+def lm_task(lm_many: LM, sp: ShootingProblem, st: Any, dt: float, iters: int
+            ) -> tuple[Any, Counters, Counters]:
+    """Worker side: ``lm_many`` on the starts of ``st`` -> the state and the counters."""
     before = _counters(sp)
     return lm_many(sp, st, dt, iters), before, _counters(sp)
 
 
-def lm_spread(sp: ShootingProblem, st: LMState, dt: float, iters: int,
-              progress: Callable[[int, int, float], None] | None = None) -> LMState:
-    """:func:`lm_many` on the active starts of ``st``, in groups on the current executor,
-    merged back into ``st``; ``progress(it, iters, best)`` and ``st.history`` after each
-    iteration as the batched call gives them (the best cost over every start, a group that
-    stopped early at its last cost)."""
+def lm_spread(lm_many: LM, sp: ShootingProblem, st: Any, dt: float, iters: int,
+              progress: Callable[[int, int, float], None] | None = None) -> Any:
+    """``lm_many`` (``shooting_search.lm_many``) on the active starts of the ``LMState``
+    ``st``, in groups on the current executor, merged back into ``st``; ``progress(it, iters,
+    best)`` and ``st.history`` after each iteration as the batched call gives them (the best
+    cost over every start, a group that stopped early at its last cost)."""
     from ema_cli.sweep.executor import Task, current
 
     ex = current()
@@ -93,11 +96,11 @@ def lm_spread(sp: ShootingProblem, st: LMState, dt: float, iters: int,
     groups = _groups(act)
     if not ex.remote or len(groups) < 2:
         return lm_many(sp, st, dt, iters, progress=progress)
-    out = ex.run(Task(lm_task, (sp, _part(st, g), dt, iters), _label(g, "joint fit"))
-                 for g in groups)
+    out = ex.run(Task(lm_task, (lm_many, sp, _part(st, g), dt, iters),
+                      _label(g, "joint fit")) for g in groups)
     for g, (part, before, after) in zip(groups, out, strict=True):
         _add(sp, before, after)
-        for f in fields(LMState):
+        for f in fields(st):
             if f.name != "history":
                 getattr(st, f.name)[g] = getattr(part, f.name)
     n_it = max(len(part.history) for part, _, _ in out)

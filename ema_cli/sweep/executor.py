@@ -39,12 +39,12 @@ import os
 import re
 import threading
 import time
-import uuid
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 from ema_cli.errors import EmaError
+from ema_cli.sweep.pools import LOST, DaskPool, LokyPool, describe, killed_worker
 
 BACKENDS = ("auto", "loky", "threads", "dask")
 LOCAL_DEFAULT = "threads"
@@ -53,7 +53,6 @@ experiments/bench_sweep.py (1,000 jobs of 1 s, 2 cores, fresh processes, medians
 3.85 s end to end, loky 4.73 s; the kernel time is the same (3.43 s vs 3.46 s), loky's extra
 ~1 s is starting the workers and loading the kernel in each."""
 MAX_ATTEMPTS = 2  # runs of one block at most: a lost worker's block is run once more [-]
-LOKY_IDLE_S = 300  # loky workers idle this long shut down (kept warm between stages) [s]
 DASK_AHEAD = 2  # blocks submitted per Dask worker thread (one running, one queued) [-]
 BUFFER_FACTOR = 2  # finished blocks held for the submission order, per block in flight [-]
 DASK_TIMEOUT = "10s"  # connecting to a Dask scheduler gives up after this
@@ -100,14 +99,6 @@ class BlockFailed(EmaError):
         return (type(self), (self.failure,))
 
 
-@dataclass
-class _Outcome:
-    """What the worker side returns: the value and the seconds the task took there."""
-
-    value: Any
-    seconds: float
-
-
 def cpu_count() -> int:
     """Cores this process may use."""
     try:
@@ -149,30 +140,6 @@ def check_dask(scheduler: str | None) -> None:
         import dask.distributed  # noqa: F401
     except ImportError:
         raise EmaError(DASK_HINT) from None
-
-
-def call(fn: Callable[..., Any], args: tuple[Any, ...], where: str) -> _Outcome:
-    """Worker side: ``fn(*args)`` with the kernel threads of ``where`` -> the value and its
-    seconds. ``process``: a loky worker, one numba thread; ``dask``: a Dask worker, one numba
-    thread when it runs one task thread, else the serial kernel (safe in any thread)."""
-    import numba
-
-    from ema_cli.sim.runner import serial_kernels
-
-    t0 = time.perf_counter()
-    serial = False
-    if where == "dask":
-        from distributed import get_worker
-
-        serial = get_worker().state.nthreads > 1
-    previous = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        with serial_kernels(serial):
-            value = fn(*args)
-    finally:
-        numba.set_num_threads(previous)
-    return _Outcome(value, time.perf_counter() - t0)
 
 
 class Executor:
@@ -309,7 +276,7 @@ class Executor:
 
     def _remote(self, tasks: Iterator[Task], ordered: bool, failures: str
                 ) -> Iterator[tuple[int, Any]]:
-        pool = _LokyPool(self) if self.backend == "loky" else _DaskPool(self)
+        pool = LokyPool(self) if self.backend == "loky" else DaskPool(self)
         ahead = self.workers * (DASK_AHEAD if self.backend == "dask" else 1)
         held: dict[int, Any] = {}  # finished, waiting for the blocks before them
         seconds: dict[int, float] = {}
@@ -338,13 +305,13 @@ class Executor:
                         raise value
                     elif attempts[i] < MAX_ATTEMPTS:
                         attempts[i] += 1
-                        if not _killed_worker(value):  # else the scheduler's event told it
+                        if not killed_worker(value):  # else the scheduler's event told it
                             with self._lock:
-                                self.retries.append((task.label, _describe(value)))
+                                self.retries.append((task.label, describe(value)))
                         pool.submit(i, task)
                         continue
                     else:
-                        why = _describe(value)
+                        why = describe(value)
                         with self._lock:  # the losses retried, and this one
                             lost = sum(1 for b, w in self.retries if b == task.label
                                        and w.startswith(LOST)) + why.startswith(LOST)
@@ -365,137 +332,6 @@ class Executor:
                     nxt += 1
         finally:
             pool.cancel()
-
-
-LOST = "worker lost"  # how a retry after a lost worker starts [-]
-
-
-def _killed_worker(exc: BaseException) -> bool:
-    """True for Dask's KilledWorker: the scheduler gave a block up after losing workers."""
-    return type(exc).__name__ == "KilledWorker"
-
-
-def _describe(exc: BaseException) -> str:
-    """One line: the exception's type and message (a worker process that died: its exit
-    code)."""
-    name = type(exc).__name__
-    if name in ("TerminatedWorkerError", "BrokenProcessPool"):
-        codes = re.search(r"exit codes of the workers are (\{[^}]*\})", str(exc))
-        return f"{LOST}: a worker process died" + (f" (exit {codes.group(1)})" if codes
-                                                    else "")
-    if _killed_worker(exc):
-        return "KilledWorker: the scheduler gave it up after losing the workers running it"
-    text = " ".join(str(exc).split())[:300]
-    return f"{name}: {text}" if text else name
-
-
-class _LokyPool:
-    """Blocks in loky worker processes, at most one per worker in flight (a worker that dies
-    breaks the pool: every block in flight is lost and run again on a fresh pool)."""
-
-    def __init__(self, ex: Executor) -> None:
-        self.ex = ex
-        self.futures: dict[Any, int] = {}
-        self.pool = self._pool()
-
-    def _pool(self) -> Any:
-        from joblib.externals.loky import get_reusable_executor
-
-        return get_reusable_executor(max_workers=self.ex.workers, timeout=LOKY_IDLE_S,
-                                     reuse=True)
-
-    @property
-    def in_flight(self) -> int:
-        return len(self.futures)
-
-    def submit(self, i: int, task: Task) -> None:
-        from joblib.externals.loky.process_executor import BrokenProcessPool
-
-        try:
-            fut = self.pool.submit(call, task.fn, task.args, "process")
-        except (BrokenProcessPool, RuntimeError):  # broken or shut down: a fresh pool
-            self.pool = self._pool()
-            fut = self.pool.submit(call, task.fn, task.args, "process")
-        self.futures[fut] = i
-
-    def wait(self) -> list[tuple[int, bool, Any]]:
-        """Block until some finish -> (index, ok, outcome or exception) of each."""
-        from concurrent.futures import FIRST_COMPLETED
-        from concurrent.futures import wait as wait_any
-
-        done, _ = wait_any(list(self.futures), return_when=FIRST_COMPLETED)
-        out = []
-        for fut in done:
-            i = self.futures.pop(fut)
-            exc = fut.exception()
-            out.append((i, exc is None, fut.result() if exc is None else exc))
-        if any(not ok for _, ok, _ in out):
-            self.pool = self._pool()  # a new pool if this one broke
-        return sorted(out, key=lambda r: r[0])
-
-    def cancel(self) -> None:
-        """Stop: blocks not started are cancelled; on an interruption the workers are
-        killed (a running block would otherwise finish for nothing)."""
-        for fut in self.futures:
-            fut.cancel()
-        if any(not f.done() for f in self.futures):
-            with contextlib.suppress(Exception):
-                self.pool.shutdown(wait=False, kill_workers=True)
-        self.futures.clear()
-
-
-class _DaskPool:
-    """Blocks on a Dask cluster (futures with keys of their own, so the scheduler's events
-    name them)."""
-
-    def __init__(self, ex: Executor) -> None:
-        from dask.distributed import as_completed
-
-        self.ex = ex
-        self.client = ex.client
-        self.futures: dict[str, tuple[Any, int]] = {}
-        self.done = as_completed([], with_results=False, loop=self.client.loop)
-
-    @property
-    def in_flight(self) -> int:
-        return len(self.futures)
-
-    def submit(self, i: int, task: Task) -> None:
-        slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", task.label)[:60]
-        key = f"ema-{slug}-{uuid.uuid4().hex[:12]}"
-        with self.ex._lock:
-            self.ex._labels[key] = task.label
-        fut = self.client.submit(call, task.fn, task.args, "dask", key=key, pure=False,
-                                 retries=0)
-        self.futures[key] = (fut, i)
-        self.done.add(fut)
-
-    def wait(self) -> list[tuple[int, bool, Any]]:
-        out = []
-        for fut in self.done.next_batch(block=True):
-            _, i = self.futures.pop(fut.key)
-            with self.ex._lock:
-                self.ex._labels.pop(fut.key, None)
-            if fut.status == "finished":
-                try:
-                    out.append((i, True, fut.result()))
-                except Exception as exc:  # lost between finishing and being fetched
-                    out.append((i, False, exc))
-            else:
-                exc = fut.exception() if fut.status == "error" else None
-                out.append((i, False, exc or RuntimeError(f"block {fut.status}")))
-            fut.release()
-        return sorted(out, key=lambda r: r[0])
-
-    def cancel(self) -> None:
-        futs = [f for f, _ in self.futures.values()]
-        if futs:
-            with contextlib.suppress(Exception):
-                self.client.cancel(futs)
-        with self.ex._lock:
-            for key in self.futures:
-                self.ex._labels.pop(key, None)
-        self.futures.clear()
 
 
 # ---------------------------------------------------------------------- the context
