@@ -14,8 +14,8 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
-    from ema_cli.identify.run import IdentificationResult
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.identify.torque.run import IdentificationResult
+    from ema_cli.identify.torque.settings import IdentifySettings
 
 DATA_COLUMNS = {"t_s": "t", "dtheta_rad": "dth", "domega_rad_s": "dw", "torque_nm": "torque"}
 """Identification data columns (edge name -> IdentData field); ``torque_model_nm`` is the
@@ -39,7 +39,7 @@ class Identification:
         least-squares optimum and its standard error, SI units in ``unit``."""
         import pandas as pd
 
-        from ema_cli.identify.problem import PARAM_UNITS
+        from ema_cli.identify.torque.problem import PARAM_UNITS
 
         rows = [{"parameter": n, "unit": PARAM_UNITS[n], **s}
                 for n, s in self.result.summary().items()]
@@ -105,7 +105,7 @@ def load_settings(config: ConfigSource = None, overrides: Overrides = None
     """The validated identification settings of ``config`` with ``overrides`` (what
     :func:`identify` runs), e.g. to report the method before a long run."""
     from ema_cli.config.loader import load_config
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.identify.torque.settings import IdentifySettings
 
     return load_config(config, override_pairs(overrides), IdentifySettings)
 
@@ -120,8 +120,8 @@ def identify(config: ConfigSource = None, overrides: Overrides = None,
                ``data="log.csv"``, ``runs=5`` (see ``identify.settings.IdentifySettings``)
     """
     from ema_cli.config.loader import load_config
-    from ema_cli.identify.run import run_identification
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.identify.torque.run import run_identification
+    from ema_cli.identify.torque.settings import IdentifySettings
 
     pairs = override_pairs(overrides)
     pairs += [(k, list(v) if isinstance(v, tuple) else v) for k, v in settings.items()]

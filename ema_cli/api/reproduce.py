@@ -107,7 +107,7 @@ def identification_summary(settings: Any, out: Path | None = None,
     """``identify.run.summarize_identification`` (its flat scalars are returned) and, when
     ``out`` is given, the identify folders written there (the paper-mode run's in
     ``out/ga-paper``, by ``report.identify_figures.write_identification_summary``)."""
-    from ema_cli.identify.run import summarize_identification
+    from ema_cli.identify.torque.run import summarize_identification
     from ema_cli.report.identify_figures import write_identification_summary
 
     summary = summarize_identification(settings, with_paper_mode, with_mismatch)

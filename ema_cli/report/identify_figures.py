@@ -22,8 +22,8 @@ from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json
 
 if TYPE_CHECKING:
-    from ema_cli.identify.data import IdentData
-    from ema_cli.identify.run import IdentificationResult, IdentificationSummary
+    from ema_cli.identify.torque.data import IdentData
+    from ema_cli.identify.torque.run import IdentificationResult, IdentificationSummary
 
 LOG_FLOOR_DECADES = 30  # J plots on a log axis are floored this many decades below the start
 REL_FLOOR_PCT = 1e-14  # distances to the optimum below this (rounding) are drawn at it [%]
