@@ -24,7 +24,7 @@ model's torque at the best run's parameters."""
 
 @dataclass
 class Identification:
-    """An identification: ``result`` is ``identify.run.IdentificationResult`` (SI)."""
+    """An identification: ``result`` is ``identify.torque.run.IdentificationResult`` (SI)."""
 
     result: IdentificationResult
 
@@ -117,7 +117,7 @@ def identify(config: ConfigSource = None, overrides: Overrides = None,
     config     identification settings: a YAML file, a dict, an ``IdentifySettings`` or None
     overrides  dotted paths -> values, e.g. ``{"ga.pop": 50}``
     settings   top-level settings by name, e.g. ``k_range=(500, 700)``, ``method="exact"``,
-               ``data="log.csv"``, ``runs=5`` (see ``identify.settings.IdentifySettings``)
+               ``data="log.csv"``, ``runs=5`` (see ``identify.torque.settings.IdentifySettings``)
     """
     from ema_cli.config.loader import load_config
     from ema_cli.identify.torque.run import run_identification

@@ -79,7 +79,7 @@ def make_data_inputs(config: ConfigSource = None, overrides: Overrides = None,
 
 @dataclass
 class ClosedLoopIdentification:
-    """A closed-loop identification: ``result`` is ``identify.closed_loop_fit.ClosedLoopFit``."""
+    """A closed-loop identification: ``result`` is ``identify.closed_loop.ga_fit.ClosedLoopFit``."""
 
     result: ClosedLoopFit
 
@@ -124,7 +124,7 @@ class ClosedLoopIdentification:
 
 @dataclass
 class FrictionSweepIdentification:
-    """A friction-sweep identification: ``result`` is ``identify.friction_sweep.FrictionFit``."""
+    """A friction-sweep identification: ``result`` is ``identify.friction.sweep.FrictionFit``."""
 
     result: FrictionFit
     settings: Any
@@ -165,7 +165,7 @@ class FrictionSweepIdentification:
 
 @dataclass
 class SyntheticData:
-    """Synthetic identification data: ``log`` is ``identify.synthetic_logs.SyntheticLog``."""
+    """Synthetic identification data: ``log`` is ``identify.make_data.SyntheticLog``."""
 
     log: SyntheticLog
     settings: Any

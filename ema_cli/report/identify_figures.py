@@ -3,7 +3,7 @@
 The figure functions take an ``IdentificationResult`` and return a Figure (no file I/O);
 :func:`write_identification` writes the whole output folder through ``report.rundir``;
 :func:`write_identification_summary` writes the folders of an
-``identify.run.summarize_identification``; :func:`write_example_csv` writes identification
+``identify.torque.run.summarize_identification``; :func:`write_example_csv` writes identification
 data as a CSV.
 """
 
@@ -226,7 +226,7 @@ def write_identification(
 
 
 def write_identification_summary(summary: IdentificationSummary, out: Path) -> None:
-    """Write the identify folder of every run of ``summary`` (``identify.run.
+    """Write the identify folder of every run of ``summary`` (``identify.torque.run.
     summarize_identification``) under ``out`` (the paper-mode run's in ``out/ga-paper``)."""
     for sub, res in summary.results.items():
         write_identification(res, Path(out) / sub, command="identify (library)")
