@@ -3,7 +3,7 @@
 Each start's segment states and Levenberg-Marquardt path depend on that start alone (every
 kernel row, every damping and every re-seat is the start's own; a batch only shares kernel
 calls), so the starts can run in groups on other workers and give the same bits: the search
-(:func:`ema_cli.identify.shooting_search.search`) runs its rounds through
+(:func:`ema_cli.identify.closed_loop.shooting_search.search`) runs its rounds through
 :func:`start_states_spread` and :func:`lm_spread`, which cut the active starts into one group
 per worker on a remote backend (loky, dask) and merge the groups back in start order; in this
 process they are the batched calls themselves.
@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.shooting import ShootingProblem
-from ema_cli.identify.shooting_seat import start_states
+from ema_cli.identify.closed_loop.shooting import ShootingProblem
+from ema_cli.identify.closed_loop.shooting_seat import start_states
 
 LM = Callable[..., Any]
 """``shooting_search.lm_many`` (passed in: the search imports this module)."""
