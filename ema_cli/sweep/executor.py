@@ -12,7 +12,9 @@ Backends (:data:`BACKENDS`): ``threads`` runs every task here, one after the oth
 spreading its kernel batches over numba's threads (``serial``: one thread); ``loky`` runs them
 in worker processes (one numba thread each); ``dask`` on the workers of a Dask scheduler (a
 worker running one task thread uses the parallel kernel on one numba thread, a worker running
-several uses the serial kernel, which is safe in any thread; both give the same bits).
+several uses the serial kernel, which is safe in any thread; both give the same bits). A
+Dask worker runs a block only if its ema is the client's (version and a hash of every source,
+``pools.code_key``): one with other code could give other bits, so it refuses with a user error.
 
 Failures. An :class:`~ema_cli.errors.EmaError` raised by a task is the user's (a sampled
 unit that is not a valid actuator, a missing file): it stops the run at once, as it would

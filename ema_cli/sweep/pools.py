@@ -10,11 +10,14 @@ kernel), the block runs, its value comes back with the seconds it took there.
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import re
 import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 LOKY_IDLE_S = 300  # loky workers idle this long shut down (kept warm between stages) [s]
@@ -28,10 +31,41 @@ class _Outcome:
     seconds: float
 
 
-def call(fn: Callable[..., Any], args: tuple[Any, ...], where: str) -> _Outcome:
+def source_fingerprint(root: Path) -> str:
+    """A hash of every ``*.py`` file under ``root`` (relative paths and contents) [12 hex]."""
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes()
+                 + b"\0")
+    return h.hexdigest()[:12]
+
+
+@functools.cache
+def code_key() -> str:
+    """This process's ema: its version and :func:`source_fingerprint` of the package. A Dask
+    worker must run the same code as the client, or its blocks' bits could differ."""
+    import ema_cli
+
+    return f"{ema_cli.__version__}+{source_fingerprint(Path(ema_cli.__file__).parent)}"
+
+
+def check_code(expected: str, where: str) -> None:
+    """Refuse to run a block on a worker whose ema is not the client's (``expected``:
+    the client's :func:`code_key`; ``where`` names the worker)."""
+    from ema_cli.errors import EmaError
+
+    if code_key() != expected:
+        raise EmaError(f"{where} runs ema {code_key()}, this process ema {expected} "
+                       "(version+source hash): install the same ema on every worker "
+                       "(docs/cluster.md)", 1)
+
+
+def call(fn: Callable[..., Any], args: tuple[Any, ...], where: str,
+         code: str | None = None) -> _Outcome:
     """Worker side: ``fn(*args)`` with the kernel threads of ``where`` -> the value and its
     seconds. ``process``: a loky worker, one numba thread; ``dask``: a Dask worker, one numba
-    thread when it runs one task thread, else the serial kernel (safe in any thread)."""
+    thread when it runs one task thread, else the serial kernel (safe in any thread).
+    ``code``: the client's :func:`code_key`, checked against this worker's first."""
     import numba
 
     from ema_cli.sim.runner import serial_kernels
@@ -41,7 +75,12 @@ def call(fn: Callable[..., Any], args: tuple[Any, ...], where: str) -> _Outcome:
     if where == "dask":
         from distributed import get_worker
 
-        serial = get_worker().state.nthreads > 1
+        worker = get_worker()
+        if code is not None:
+            check_code(code, f"dask worker {worker.address}")
+        serial = worker.state.nthreads > 1
+    elif code is not None:
+        check_code(code, f"worker {where}")
     previous = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
@@ -150,8 +189,8 @@ class DaskPool:
         key = f"ema-{slug}-{uuid.uuid4().hex[:12]}"
         with self.ex._lock:
             self.ex._labels[key] = task.label
-        fut = self.client.submit(call, task.fn, task.args, "dask", key=key, pure=False,
-                                 retries=0)
+        fut = self.client.submit(call, task.fn, task.args, "dask", code_key(), key=key,
+                                 pure=False, retries=0)
         self.futures[key] = (fut, i)
         self.done.add(fut)
 

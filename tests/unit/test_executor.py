@@ -156,3 +156,27 @@ def test_serial_kernels_give_the_parallel_kernels_bits():
         b = simulate_batch(P, [ref], None, 1e-4, 2000, 10, parallel=True)
     np.testing.assert_array_equal(a.metrics, b.metrics)
     np.testing.assert_array_equal(a.signals, b.signals)
+
+
+def test_a_worker_with_other_ema_sources_refuses_the_block(tmp_path):
+    """The client's code key (version + a hash of every source) travels with each Dask block;
+    a worker whose installed ema differs refuses it with a user error naming both, since its
+    bits could differ; the hash moves with one byte of one source."""
+    from ema_cli.sweep.pools import call, code_key, source_fingerprint
+
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "b.py").write_text("y = 2\n")
+    (tmp_path / "notes.txt").write_text("not a source")
+    before = source_fingerprint(tmp_path)
+    assert len(before) == 12 and source_fingerprint(tmp_path) == before
+    (tmp_path / "notes.txt").write_text("changed")  # not a source: the same key
+    assert source_fingerprint(tmp_path) == before
+    (tmp_path / "sub" / "b.py").write_text("y = 3\n")
+    assert source_fingerprint(tmp_path) != before
+
+    assert call(square_after, (3, 0.0), "process", code_key()).value == 9
+    with pytest.raises(EmaError, match=r"worker process runs ema 0\.\d.*\+[0-9a-f]{12}, this "
+                                       r"process ema 0\.0\.0\+000000000000 .*same ema") as err:
+        call(square_after, (3, 0.0), "process", "0.0.0+000000000000")
+    assert err.value.exit_code == 1
