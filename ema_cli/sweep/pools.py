@@ -73,7 +73,7 @@ def call(fn: Callable[..., Any], args: tuple[Any, ...], where: str,
     t0 = time.perf_counter()
     serial = False
     if where == "dask":
-        from distributed import get_worker
+        from dask.distributed import get_worker
 
         worker = get_worker()
         if code is not None:
