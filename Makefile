@@ -60,6 +60,8 @@ bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep,
 	$(BIN)/python experiments/bench_compile.py
 	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
+	$(BIN)/python experiments/bench_kernel_vs_wave3.py
+	$(BIN)/python experiments/emps_simulation.py
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
 	rm -rf results/bench/yield-1000
