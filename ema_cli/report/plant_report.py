@@ -186,9 +186,11 @@ def validation_markdown(v: PlantValidation) -> str:
 
 
 def channels_figure(t: np.ndarray, measured: dict[str, np.ndarray],
-                    sims: dict[str, dict[str, np.ndarray]], axis: str, title: str) -> Figure:
+                    sims: dict[str, dict[str, np.ndarray]], axis: str, title: str,
+                    use: np.ndarray | None = None) -> Figure:
     """Force (measured and each model) and each model's residuals: force and position error,
-    against time, in the axis' units."""
+    against time, in the axis' units; the residual axes scaled to the samples ``use`` (the
+    fitted ones: the controller's start-up left out), the others shaded."""
     fu, ff = EDGE[axis]["force"]
     su, sf = EDGE[axis]["small"]
     fig, ax = subplots(3, 1, figsize=(10.0, 8.0), sharex=True)
@@ -202,6 +204,16 @@ def channels_figure(t: np.ndarray, measured: dict[str, np.ndarray],
         ax[2].plot(t, (measured["q"] - s["q"]) * sf, color=f"C{k}", lw=0.7,
                    label=f"{name}: RMS {np.sqrt(np.mean((measured['q'] - s['q']) ** 2)) * sf:.3g}"
                          f" {su}")
+    if use is not None and use.any() and not use.all():
+        for a, key, f in ((ax[1], "F", ff), (ax[2], "q", sf)):
+            worst = max(float(np.max(np.abs(measured[key][use] - s[key][use]))) * f
+                        for s in sims.values())
+            a.set_ylim(-1.15 * worst, 1.15 * worst)
+        edges = np.flatnonzero(np.diff(np.r_[0, (~use).astype(int), 0]))
+        for k0, k1 in zip(edges[::2], edges[1::2], strict=True):
+            for a in ax:
+                a.axvspan(t[k0], t[min(k1, t.size - 1)], color="0.85", zorder=0,
+                          label="not fitted" if (a is ax[0] and k0 == edges[0]) else None)
     ax[0].set_ylabel(f"actuation force [{fu}]")
     ax[1].set_ylabel(f"force residual\nmeasured - simulated [{fu}]")
     ax[2].set_ylabel(f"position residual\nmeasured - simulated [{su}]")
@@ -317,7 +329,7 @@ def write_plant(fit: PlantFit, out: Path, validation: PlantValidation | None = N
     write_figure(out / "fit.png", channels_figure(
         r.t_s, {"F": r.force_n, "q": r.q_m}, sims, axis,
         f"Closed-loop simulation from the reference vs the record "
-        f"{Path(str(fit.settings.data)).name}"))
+        f"{Path(str(fit.settings.data)).name}", fit.use))
     write_figure(out / "residual_tests.png", residual_tests_figure(fit.best))
     files = ["plant.json", "plant.md", "parameters.csv", "fit.csv", "actuator_fitted.yaml",
              "fit.png", "residual_tests.png"]

@@ -13,8 +13,9 @@ the verdict rests on what decides whether the model can be used:
   the fit; a term is *missed* when it is significant (two-sided Student t at 5 %, Bonferroni
   over the candidates) and lowers the force residual's RMS by at least :data:`MISSED_GAIN`;
   any missed term makes the model not adequate, and names it;
-- **whiteness** (autocorrelation at lags 1..L against +-1.96/sqrt(N)) and **independence from the
-  input** (cross-correlation with the reference's velocity at lags 0..L): reported, with the
+- **whiteness** (autocorrelation at lags 1..L against +-1.96/sqrt(N), and Ljung-Box's
+  portmanteau test over them) and **independence from the input** (cross-correlation with the
+  reference's velocity at lags 0..L, ``N sum r^2`` against chi-squared): reported, with the
   residual's correlation time, to say why the intervals come from a cluster-robust covariance;
   not a verdict on their own;
 - **where**: the time blocks whose residual RMS exceeds :data:`BLOCK_FACTOR` times the median
@@ -58,8 +59,11 @@ def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
 
 @dataclass
 class CorrelationTest:
-    """A correlation test: ``values`` at the lags tested, the 95 % ``bound`` 1.96/sqrt(N),
-    ``outside`` the share of lags beyond it, ``worst`` the largest |value| and its ``lag``."""
+    """A correlation test: ``values`` at the lags tested, the 95 % ``bound`` 1.96/sqrt(N) of one
+    lag, ``outside`` the share of lags beyond it, ``worst`` the largest |value| and its ``lag``;
+    the portmanteau ``statistic`` over all lags (Ljung-Box ``N(N+2) sum r_k^2/(N-k)`` for an
+    autocorrelation, ``N sum r_k^2`` for a cross-correlation; chi-squared with one degree of
+    freedom per lag under the null) and its ``p_value``."""
 
     name: str
     values: np.ndarray
@@ -67,16 +71,19 @@ class CorrelationTest:
     outside: float
     worst: float
     lag: int
+    statistic: float = 0.0
+    p_value: float = 1.0
 
     @property
     def passes(self) -> bool:
-        """At most 5 % of the lags outside the bound (the test's own false-alarm rate)."""
-        return self.outside <= 0.05
+        """The portmanteau test does not reject at 5 %."""
+        return self.p_value >= 0.05
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready figures (values omitted)."""
         return {"bound": self.bound, "share_outside": self.outside, "worst": self.worst,
-                "worst_lag": self.lag, "passes": self.passes}
+                "worst_lag": self.lag, "statistic": self.statistic, "p_value": self.p_value,
+                "passes": self.passes}
 
 
 def correlation_test(name: str, r: np.ndarray, other: np.ndarray | None = None,
@@ -90,10 +97,17 @@ def correlation_test(name: str, r: np.ndarray, other: np.ndarray | None = None,
     else:
         v = _xcorr(r, other, max_lag)
         lags = np.arange(0, max_lag + 1)
-    bound = 1.96 / np.sqrt(r.size)
+    from scipy.stats import chi2
+
+    n = r.size
+    bound = 1.96 / np.sqrt(n)
     j = int(np.argmax(np.abs(v)))
+    if other is None:
+        stat = float(n * (n + 2) * np.sum(v**2 / (n - lags)))
+    else:
+        stat = float(n * np.sum(v**2))
     return CorrelationTest(name, v, float(bound), float(np.mean(np.abs(v) > bound)),
-                           float(abs(v[j])), int(lags[j]))
+                           float(abs(v[j])), int(lags[j]), stat, float(chi2.sf(stat, v.size)))
 
 
 def failing_ranges(t: np.ndarray, r: np.ndarray, block_s: float) -> list[tuple[float, float,
@@ -158,9 +172,10 @@ class OmittedTerm:
                 "t": self.t, "p": self.p, "rms_reduction": self.gain, "missed": self.missed}
 
 
-def candidate_columns(v: np.ndarray, law: Sequence[str]) -> list[tuple[str, str, np.ndarray]]:
+def candidate_columns(v: np.ndarray, law: Sequence[str], v_unit: str = "m/s"
+                      ) -> list[tuple[str, str, np.ndarray]]:
     """The candidate terms the law lacks, as (name, meaning, column [n]) on the velocity ``v``
-    [m/s or rad/s]."""
+    [``v_unit``: m/s or rad/s]."""
     law = set(law)
     speed = np.abs(v)
     vref = float(np.percentile(speed, 90)) if speed.size else 1.0
@@ -171,8 +186,9 @@ def candidate_columns(v: np.ndarray, law: Sequence[str]) -> list[tuple[str, str,
     for k in (0.02, 0.05, 0.2):
         vs = k * vref
         if vs > 0:
-            out.append((f"Stribeck vs={vs:.3g}", f"a static peak decaying over {vs:.3g} "
-                        "(sign(v) exp(-(|v|/vs)^2))", np.sign(v) * np.exp(-(speed / vs) ** 2)))
+            out.append((f"Stribeck vs={vs:.3g} {v_unit}", f"a static peak decaying over {vs:.3g} "
+                        f"{v_unit} (sign(v) exp(-(|v|/vs)^2))",
+                        np.sign(v) * np.exp(-(speed / vs) ** 2)))
     out.append(("drag v|v|", "quadratic drag (v |v|)", v * speed))
     if "OF" not in law and not ({"Fc+", "Fc-"} <= law):
         out.append(("offset", "a constant force", np.ones_like(v)))
@@ -180,7 +196,7 @@ def candidate_columns(v: np.ndarray, law: Sequence[str]) -> list[tuple[str, str,
 
 
 def omitted_terms(r_force: np.ndarray, v: np.ndarray, law: Sequence[str],
-                  clusters: Sequence[np.ndarray]) -> list[OmittedTerm]:
+                  clusters: Sequence[np.ndarray], v_unit: str = "m/s") -> list[OmittedTerm]:
     """Each candidate term (:func:`candidate_columns`) regressed alone on the force residual
     ``r_force`` = measured - simulated [N], with the CR3 cluster-robust standard error over
     ``clusters`` (index arrays of the samples) -> the tests, Bonferroni over the candidates."""
@@ -188,7 +204,7 @@ def omitted_terms(r_force: np.ndarray, v: np.ndarray, law: Sequence[str],
 
     from ema_cli.identify.uncertainty import covariance_clustered
 
-    cands = candidate_columns(v, law)
+    cands = candidate_columns(v, law, v_unit)
     out = []
     rms0 = float(np.sqrt(np.mean(r_force**2)))
     k = max(len(cands), 1)
@@ -205,6 +221,12 @@ def omitted_terms(r_force: np.ndarray, v: np.ndarray, law: Sequence[str],
         rms_base = float(np.sqrt(np.mean(base**2))) if name != "offset" else rms0
         gain = float(1.0 - np.sqrt(np.mean(e**2)) / rms_base) if rms_base > 0 else 0.0
         missed = p < ALPHA / k and gain >= MISSED_GAIN
+        if name.startswith("Stribeck"):  # what the sign says: a peak, or a dip (pre-sliding)
+            vs = name.split("=")[1]
+            meaning = (f"friction above the Coulomb level near rest, decaying over |v| ~ {vs} "
+                       "(a Stribeck peak)" if beta[0] > 0 else
+                       f"friction below the Coulomb level near rest, over |v| ~ {vs} "
+                       "(pre-sliding: a LuGre or Dahl law)")
         out.append(OmittedTerm(name, meaning, float(beta[0]), se, tval, p, gain, missed))
     # the Stribeck family at its best speed only (the Bonferroni count kept every speed)
     strib = [o for o in out if o.name.startswith("Stribeck")]
@@ -265,6 +287,7 @@ def judge(a: Adequacy, n_clusters: int, min_clusters: int) -> Adequacy:
         a.reasons = [f"every channel fits >= {FIT_MIN:g} % and no candidate term is missed"]
         if white:
             a.reasons.append("residuals are coloured (" + "; ".join(
-                f"{t.name}: {100 * t.outside:.0f} % of lags beyond +-{t.bound:.2g}"
+                f"{t.name}: {100 * t.outside:.0f} % of lags beyond +-{t.bound:.2g}, "
+                f"p = {t.p_value:.2g}"
                 for t in white) + "): the intervals come from the cluster-robust covariance")
     return a

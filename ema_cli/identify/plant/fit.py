@@ -163,6 +163,8 @@ def _plant(settings: PlantSettings, base: dict, resolve: Callable, prm: dict,
             "x0_theta_m": float(record.q_m[0]) * prm.get("m", 1.0)}
     if extras.get("disturbance") is not None:
         base["dist_out"] = 1.0
+    if "OF" not in names:  # a law without the offset: its per-direction Coulomb levels carry it
+        base["offset"] = 0.0
     static_follows = base.get("Fs_L") == base.get("Fc_L")
     mass_extra = prm.get("m", 1.0) ** 2 * prm.get("Jm", 0.0)
     return oe.ClosedLoopPlant(base, resolve, _signal(record, ts, extras.get("disturbance")),
@@ -211,8 +213,8 @@ def _uncertainty(fit: oe.OutputErrorFit, use: np.ndarray, h: float
 
 
 def _adequacy(record: PlantRecord, law: str, fit: oe.OutputErrorFit, F: np.ndarray,
-              q: np.ndarray, use: np.ndarray, clusters: list[np.ndarray], block_s: float
-              ) -> adq.Adequacy:
+              q: np.ndarray, use: np.ndarray, clusters: list[np.ndarray], block_s: float,
+              v_unit: str = "m/s") -> adq.Adequacy:
     m = int(np.count_nonzero(use))
     t = record.t_s[use]
     rF = record.force_n[use] - F[use]
@@ -229,7 +231,8 @@ def _adequacy(record: PlantRecord, law: str, fit: oe.OutputErrorFit, F: np.ndarr
         fit_pct={"force": adq.fit_percent(record.force_n[use], F[use]),
                  "position": adq.fit_percent(record.q_m[use], q[use])},
         tests=tests,
-        omitted=adq.omitted_terms(rF, v, LAW_TERMS.get(law, fit.names), force_clusters),
+        omitted=adq.omitted_terms(rF, v, LAW_TERMS.get(law, fit.names), force_clusters,
+                                  v_unit),
         ranges={"force": adq.failing_ranges(t, rF, block_s),
                 "position": adq.failing_ranges(t, rq, block_s)},
         motion=adq.by_motion(rF, v),
@@ -317,7 +320,8 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                                      progress)
         unc, clusters, block = _uncertainty(fit, use, record.h_s)
         F, q, v, a = _kinematics(plant, fit.x, prm)
-        adequacy = _adequacy(record, law, fit, F, q, use, clusters, block)
+        adequacy = _adequacy(record, law, fit, F, q, use, clusters, block,
+                             "rad/s" if cfg.axis == "rotary" else "m/s")
         laws[law] = LawFit(law, start, fit, unc, adequacy, len(clusters), block, F, q, v, a)
         for k, val in (("calls", plant.calls), ("lanes", plant.lanes_run),
                        ("kernel_s", plant.kernel_s)):
@@ -337,7 +341,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
         split = _split(settings, record, use, chosen, plant_of, floors, prm, progress)
         timings["split_validation"] = time.perf_counter() - t1
     timings["total"] = time.perf_counter() - t0
-    return PlantFit(settings, record, extras, str(cfg.axis if hasattr(cfg, "axis") else ""),
+    return PlantFit(settings, record, extras, str(cfg.axis),
                     check, delay, baseline, laws, chosen, choice, errors,
                     {"F": bF, "q": bq, "v": bv, "a": ba}, split, use, timings, kernel)
 

@@ -149,14 +149,16 @@ class Channels:
 
 
 def encoder_floor(q: np.ndarray) -> float:
-    """The position's resolution over sqrt(12) [m]: the smallest step between samples that
-    is not a rounding artefact (the 1st percentile of the nonzero |dq|), the standard deviation
-    of a uniform quantiser of that step."""
-    d = np.abs(np.diff(q))
-    d = d[d > 1e-12 * max(float(np.max(np.abs(q))), 1e-300)]
+    """The position's resolution over sqrt(12) [m]: the smallest spacing between the distinct
+    values it takes (the median of the sorted distinct values' differences within 1.5x the
+    smallest one above rounding), the standard deviation of a uniform quantiser of that step.
+    A signal that is not quantised gives its finest spacing."""
+    u = np.unique(np.asarray(q, dtype=np.float64))
+    d = np.diff(u)
+    d = d[d > 1e-12 * max(float(np.max(np.abs(u))), 1e-300)]
     if d.size == 0:
         return 0.0
-    return float(np.percentile(d, 1.0)) / np.sqrt(12.0)
+    return float(np.median(d[d < 1.5 * d.min()])) / np.sqrt(12.0)
 
 
 def command_floor(F: np.ndarray) -> float:
