@@ -14,7 +14,7 @@ from ema_cli.identify.plant import adequacy as adq
 from ema_cli.identify.plant import output_error as oe
 from ema_cli.identify.plant.controller_check import MATCH_MAX, check_controller, chosen_delay
 from ema_cli.identify.plant.records import read_plant_mat, read_plant_record
-from tests.helpers.plant_records import ACTUATOR, EMPS, GTAU, make_record
+from tests.helpers.plant_records import EMPS, GTAU
 
 EMPS_PRM = {"Ts": 1e-3, "dc_kp": 160.18, "dc_kv": 243.45, "dc_umax": 10.0, "dc_ndiff": 1.0,
             "dc_fir0": 0.5, "dc_fir1": 0.5, "dc_delay": 1.0}

@@ -299,20 +299,24 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
     delay = chosen_delay(check, settings.delay, record.source)
     timings["read_and_check"] = time.perf_counter() - t0
     use = _mask(record, settings.window, first)
-    baseline = idim_ls(_sliced(record, use), LAW_TERMS["symmetric"])
-    tau = baseline.value("M") / max(baseline.value("Fv"), 1e-300)
+    # the slowest time constant to identify, from the description's nominal values
+    mass = prm.get("JL", 0.0) + prm.get("m", 1.0) ** 2 * prm.get("Jm", 0.0)
+    fv = max(prm.get("Fv_L", 0.0), prm.get("Fv_L_neg", 0.0))
+    tau = mass / fv if fv > 0 else 0.0
     span = float(np.count_nonzero(use) * record.h_s)
-    if span < tau:
-        raise EmaError(f"{record.source}: the fitted samples span {span:.4g} s, shorter than "
-                       f"the axis' mechanical time constant M/Fv = {tau:.4g} s (the slowest "
-                       "to identify); expected a longer --window")
+    if span < max(tau, 0.0) or np.count_nonzero(use) < 100:
+        raise EmaError(f"{record.source}: the fitted samples span {span:.4g} s "
+                       f"({np.count_nonzero(use)} samples), shorter than the axis' mechanical "
+                       f"time constant M/Fv = {tau:.4g} s (the slowest to identify; at least 100 "
+                       "samples); expected a longer --window")
+    baseline = idim_ls(_sliced(record, use), LAW_TERMS["symmetric"])
     floors = (oe.command_floor(record.force_n), oe.encoder_floor(record.q_m))
 
     def plant_of(terms: tuple[str, ...]) -> oe.ClosedLoopPlant:
         return _plant(settings, base, resolve, prm, record, extras, delay, terms)
 
     laws: dict[str, LawFit] = {}
-    kernel = {"calls": 0, "lanes": 0, "kernel_s": 0.0}
+    kernel = {"calls": 0, "lanes": 0, "kernel_s": 0.0, "load_s": 0.0}
     order = ["symmetric", "per-direction"] if settings.law == "auto" else [settings.law]
     for law in order:
         t1 = time.perf_counter()
@@ -324,7 +328,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                              "rad/s" if cfg.axis == "rotary" else "m/s")
         laws[law] = LawFit(law, start, fit, unc, adequacy, len(clusters), block, F, q, v, a)
         for k, val in (("calls", plant.calls), ("lanes", plant.lanes_run),
-                       ("kernel_s", plant.kernel_s)):
+                       ("kernel_s", plant.kernel_s), ("load_s", plant.load_s)):
             kernel[k] += val
         timings[f"fit_{law}"] = time.perf_counter() - t1
     chosen, choice = _choose(settings.law, laws)

@@ -77,6 +77,7 @@ class ClosedLoopPlant:
     mass_extra: float = 0.0
     calls: int = 0
     kernel_s: float = 0.0
+    load_s: float = 0.0
     lanes_run: int = 0
     cache: dict[bytes, tuple[np.ndarray, ...]] = field(default_factory=dict)
 
@@ -106,6 +107,7 @@ class ClosedLoopPlant:
             self.calls += 1
             self.lanes_run += len(todo)
             self.kernel_s += res.kernel_s
+            self.load_s += res.load_s
             if res.diverged.any():
                 bad = X[todo[int(np.flatnonzero(res.diverged)[0])]]
                 raise EmaError("the closed-loop simulation diverged at "
