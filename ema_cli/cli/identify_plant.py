@@ -20,8 +20,8 @@ COLUMNS_HELP = ("Map a role of the record, repeatable: ROLE=NAME[:UNIT], roles t
 
 def _pairs(columns: list[str] | None, set_: list[str] | None, law: str | None,
            delay: str | None, window: str | None, split: float | None,
-           validate: Path | None) -> list[tuple[str, Any]]:
-    from ema_cli.cli.identify_logs import parse_window
+           validate: Path | None, free: list[str] | None = None) -> list[tuple[str, Any]]:
+    from ema_cli.cli.identify_logs import _free_pairs, parse_window
 
     pairs: list[tuple[str, Any]] = [(f"columns.{r}", s)
                                     for r, s in parse_assignments(columns, "--columns")]
@@ -37,7 +37,7 @@ def _pairs(columns: list[str] | None, set_: list[str] | None, law: str | None,
         pairs.append(("split", split))
     if validate is not None:
         pairs.append(("validate_data", str(validate)))
-    return pairs
+    return pairs + _free_pairs(free)
 
 
 def _int(text: str, option: str) -> int:
@@ -122,6 +122,10 @@ def plant(
                         "split validation; default 0.7; 0: none).")] = None,
     validate: Annotated[Path | None, typer.Option(
         "--validate", help="Another record the fitted model is simulated against.")] = None,
+    free: Annotated[list[str] | None, typer.Option(
+        "--free", help="Free a further parameter of the description's friction law with "
+                       "bounds, NAME=LO,HI in SI (e.g. Fs_L=0,50, vs_L=1e-4,0.1, "
+                       "sigma0_L=1e4,1e8); repeatable.")] = None,
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="Override the description, e.g. actuator.load.mass=90; repeatable.")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
@@ -129,20 +133,22 @@ def plant(
     """Identify a rigid axis from a closed-loop record: IDIM-LS (the baseline), the controller
     checked against the log, output error in closed loop, intervals that hold on real data,
     an adequacy report, validation on a time split (and --validate LOG2)."""
-    _plant(data, actuator, config, columns, law, delay, window, split, validate, set_, out)
+    _plant(data, actuator, config, columns, law, delay, window, split, validate, set_, out,
+           free)
 
 
 @handle_errors
 def _plant(data: Path, actuator: Path, config: Path | None, columns: list[str] | None,
            law: str | None, delay: str | None, window: str | None, split: float | None,
-           validate: Path | None, set_: list[str] | None, out: Path | None) -> None:
+           validate: Path | None, set_: list[str] | None, out: Path | None,
+           free: list[str] | None = None) -> None:
     from ema_cli.api.identify_plant import PlantIdentification, plant_inputs, plant_settings
     from ema_cli.identify.plant.fit import run_plant
     from ema_cli.identify.plant.fit import validate as validate_fit
     from ema_cli.report.rundir import check_output
 
     pairs = [("data", str(data)), ("actuator", str(actuator)),
-             *_pairs(columns, set_, law, delay, window, split, validate)]
+             *_pairs(columns, set_, law, delay, window, split, validate, free)]
     settings = plant_settings(config, pairs)
     check_output(out, "identify", plant_inputs(settings))
     report_stage("reading the record, checking the controller, IDIM-LS")

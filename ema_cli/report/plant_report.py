@@ -37,9 +37,20 @@ def axis_of(fit: PlantFit) -> str:
     return "rotary" if fit.axis == "rotary" else "translational"
 
 
+EXTRA_UNITS = {"translational": {"Fs": "N", "Fc": "N", "vs": "m/s", "sigma0": "N/m",
+                                 "sigma1": "N*s/m", "Fv": "N*s/m", "delta": "-", "offset": "N"},
+               "rotary": {"Fs": "N*m", "Fc": "N*m", "vs": "rad/s", "sigma0": "N*m/rad",
+                          "sigma1": "N*m*s/rad", "Fv": "N*m*s/rad", "delta": "-",
+                          "offset": "N*m"}}
+"""Units of kernel parameters freed as themselves (``--free``), by their stem."""
+
+
 def term_unit(name: str, axis: str) -> str:
-    """The SI unit of a term on an axis."""
-    return TERM_UNITS[axis][name.rstrip("+-")]
+    """The SI unit of a term (or a freed kernel parameter) on an axis."""
+    stem = name.rstrip("+-")
+    if stem in TERM_UNITS[axis]:
+        return TERM_UNITS[axis][stem]
+    return EXTRA_UNITS[axis].get(name.split("_")[0], "")
 
 
 def parameters_table(lf: LawFit, axis: str) -> list[dict[str, Any]]:
@@ -47,18 +58,14 @@ def parameters_table(lf: LawFit, axis: str) -> list[dict[str, Any]]:
     status (determined | zero within its interval | NOT DETERMINED: why), IDIM-LS start."""
     u = lf.uncertainty
     rows = []
+    n_idim = lf.start.theta.size
     for j, n in enumerate(u.names):
-        zero = bool(np.isfinite(u.se[j]) and u.ci_low[j] <= 0 <= u.ci_high[j])
-        if u.determined[j] and not zero:
-            status = "determined"
-        elif zero and np.isfinite(u.se[j]):
-            status = "zero within its interval"
-        else:
-            status = "NOT DETERMINED: " + "; ".join(u.reasons[j])
+        status = lf.status(j)
         rows.append({"parameter": n, "value": float(u.x[j]), "unit": term_unit(n, axis),
                      "standard_error": float(u.se[j]), "ci95_low": float(u.ci_low[j]),
                      "ci95_high": float(u.ci_high[j]), "status": status,
-                     "idim_ls": float(lf.start.theta[j]), "idim_ls_std": float(lf.start.std[j])})
+                     "idim_ls": float(lf.start.theta[j]) if j < n_idim else float("nan"),
+                     "idim_ls_std": float(lf.start.std[j]) if j < n_idim else float("nan")})
     return rows
 
 
@@ -290,6 +297,14 @@ def fitted_description(fit: PlantFit) -> dict[str, Any]:
         site["negative"] = {"coulomb": f"{est['Fc-']:.10g} {fu}",
                             "viscous": f"{est['Fv-']:.10g} {vu}"}
     site.pop("static", None)
+    for name, key, unit in (("Fs_L", "static", fu), ("vs_L", "stribeck_velocity",
+                                                    "m/s" if axis == "translational" else "rad/s"),
+                            ("sigma0_L", "bristle_stiffness",
+                             "N/m" if axis == "translational" else "N*m/rad"),
+                            ("sigma1_L", "bristle_damping",
+                             "N*s/m" if axis == "translational" else "N*m*s/rad")):
+        if name in est:
+            site[key] = f"{est[name]:.10g} {unit}"
     fr["load"] = site
     desc["friction"] = fr
     ctrl = dict(desc.get("controller", {}))

@@ -87,3 +87,48 @@ def test_emps_through_the_cli(tmp_path):
     r = CliRunner().invoke(app, ["identify", "validate", str(out), str(EMPS)])
     assert r.exit_code == 0, r.output
     assert "output error: position" in r.output and "IDIM-LS: position" in r.output
+
+
+STRIBECK_DESC = """actuator:
+  name: stribeck-axis
+  axis: translational
+  transmission: {type: rigid}
+  motor: {inertia: 0}
+  load: {mass: 95, viscous: 0, offset: -3}
+  drive: {type: amplifier, gain: 35.15065188 N/V}
+  friction:
+    load: {law: stribeck, coulomb: 20 N, static: 26 N, stribeck_velocity: 0.01 m/s,
+           viscous: 200 N*s/m}
+  controller:
+    type: discrete
+    sample_time_s: 1.0e-3
+    position: {kp: 160.18}
+    velocity: {kv: 243.45 V*s/m}
+    velocity_source: encoder
+    fir: [0.5, 0.5]
+    difference_samples: 1
+    output_limit: 10
+    delay_samples: 0
+"""
+
+
+def test_a_stribeck_law_freed_by_free(tmp_path):
+    """A law beyond the linear terms: the static level and Stribeck velocity freed with
+    --free-style bounds are recovered within their intervals; the Coulomb-only law misses the
+    peak (NOT ADEQUATE, a positive Stribeck coefficient)."""
+    truth = {"M": 90.0, "Fv+": 200.0, "Fc+": 20.0, "Fv-": 200.0, "Fc-": 20.0, "OF": -3.0,
+             "Fs_L": 30.0, "Fs_L_neg": 30.0, "vs_L": 0.005}
+    p = make_record(tmp_path / "strib.mat", truth, seconds=8.0, noise_v=0.07)
+    desc = tmp_path / "strib.yaml"
+    desc.write_text(STRIBECK_DESC)
+    fit = run_plant(PlantSettings(data=str(p), actuator=str(desc), law="symmetric", split=0.0,
+                                  free={"Fs_L": (0.0, 60.0), "vs_L": (1e-4, 0.1)}))
+    _contains(fit.best, {"M": 90.0, "Fv": 200.0, "Fc": 20.0, "OF": -3.0, "Fs_L": 30.0,
+                         "vs_L": 0.005})
+    assert fit.best.determined()[0]
+    plain = run_plant(PlantSettings(data=str(p), actuator=str(ACTUATOR), law="symmetric",
+                                    split=0.0))
+    a = plain.best.adequacy
+    assert a.verdict == "NOT ADEQUATE"
+    strib = next(o for o in a.omitted if o.name.startswith("Stribeck"))
+    assert strib.missed and strib.coefficient > 0, a.reasons

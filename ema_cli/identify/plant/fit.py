@@ -60,17 +60,32 @@ class LawFit:
     q: np.ndarray
     v: np.ndarray
     a: np.ndarray
+    on_bound: np.ndarray
 
     @property
     def estimate(self) -> dict[str, float]:
         """Term -> value (SI)."""
         return {n: float(v) for n, v in zip(self.fit.names, self.fit.x, strict=True)}
 
+    def status(self, j: int) -> str:
+        """Parameter j: ``determined``, ``zero within its interval`` (a force term of the law
+        the data do not need), ``on its bound`` or ``NOT DETERMINED: why``."""
+        u = self.uncertainty
+        n = u.names[j]
+        if n not in oe.TERM_PARAMS and self.on_bound[j]:
+            return "NOT DETERMINED: on its bound"
+        zero = bool(np.isfinite(u.se[j]) and u.ci_low[j] <= 0 <= u.ci_high[j])
+        if zero and n in oe.TERM_PARAMS and n != "M":
+            return "zero within its interval"
+        if u.determined[j] and not zero:
+            return "determined"
+        why = list(u.reasons[j]) or ["its 95 % interval contains 0"]
+        return "NOT DETERMINED: " + "; ".join(why)
+
     def determined(self) -> tuple[bool, list[str]]:
         """(every parameter determined or zero within its interval, the undetermined ones)."""
         u = self.uncertainty
-        bad = [n for j, n in enumerate(u.names) if not u.determined[j]
-               and not (np.isfinite(u.se[j]) and u.ci_low[j] <= 0 <= u.ci_high[j])]
+        bad = [n for j, n in enumerate(u.names) if self.status(j).startswith("NOT")]
         return not bad, bad
 
 
@@ -134,9 +149,12 @@ def _description(settings: PlantSettings) -> tuple[Any, dict[str, Any], Callable
     if prm.get("friction_L", 0.0) == 0.0:
         raise EmaError(f"{where}: friction.load.law is none; the plant fit frees the load's "
                        "Coulomb and viscous friction: give law coulomb (or stribeck)")
-    if prm.get("friction_L") not in (2.0,):
-        raise EmaError(f"{where}: friction.load.law must be coulomb or stribeck (Coulomb + "
-                       "viscous, per direction or not) for a plant fit")
+    if prm.get("friction_L") not in (1.0, 2.0):
+        raise EmaError(f"{where}: friction.load.law must be coulomb, stribeck or lugre for a "
+                       "plant fit")
+    if prm.get("friction_L") == 1.0 and settings.law == "per-direction":
+        raise EmaError(f"{where}: friction.load.law is lugre, a symmetric law; expected --law "
+                       "symmetric or auto (or a coulomb/stribeck law per direction)")
     if prm.get("friction", 0.0) != 0.0:
         raise EmaError(f"{where}: friction.motor is set; the plant fit frees the friction at "
                        "the load (in load units): move it to friction.load")
@@ -253,19 +271,26 @@ def _sliced(record: PlantRecord, use: np.ndarray) -> PlantRecord:
 
 
 def _fit_law(law: str, record: PlantRecord, use: np.ndarray, plant_of: Callable,
-             ch_floor: tuple[float, float], max_iter: int, progress: Callable | None
+             ch_floor: tuple[float, float], max_iter: int, progress: Callable | None,
+             free: Mapping[str, tuple[float, float]], prm: Mapping[str, float]
              ) -> tuple[IdimEstimate, oe.OutputErrorFit, oe.ClosedLoopPlant]:
-    terms = LAW_TERMS[law]
-    start = idim_ls(_sliced(record, use), terms)
+    law_terms = LAW_TERMS[law]
+    start = idim_ls(_sliced(record, use), law_terms)
+    terms = (*law_terms, *free)
     plant = plant_of(terms)
     ch = oe.Channels(record.force_n, record.q_m, use, *ch_floor)
-    x0 = start.theta.copy()
-    scale = np.maximum(10.0 * start.std, 1e-3 * np.abs(x0))
+    x_extra = np.array([min(max(float(prm.get(n, 0.0)), lo), hi) for n, (lo, hi) in
+                        free.items()])
+    x0 = np.concatenate([start.theta, x_extra])
+    scale = np.concatenate([np.maximum(10.0 * start.std, 1e-3 * np.abs(start.theta)),
+                            [max(0.05 * abs(x), 1e-3 * (hi - lo)) for x, (lo, hi) in
+                             zip(x_extra, free.values(), strict=True)]])
     scale = np.where(scale > 0, scale, 1.0)
     lower = np.where(np.array([n in ("M",) or n.startswith("Fv") or n.startswith("Fc")
-                               for n in terms]), 0.0, -np.inf)
-    lower[np.array([n == "M" for n in terms])] = 1e-9 * max(abs(x0[0]), 1.0)
-    upper = np.full(len(terms), np.inf)
+                               for n in law_terms]), 0.0, -np.inf)
+    lower[np.array([n == "M" for n in law_terms])] = 1e-9 * max(abs(start.theta[0]), 1.0)
+    lower = np.concatenate([lower, [lo for lo, _ in free.values()]])
+    upper = np.concatenate([np.full(len(law_terms), np.inf), [hi for _, hi in free.values()]])
 
     def step(i: int, n: int, cost: float) -> None:
         if progress is not None:
@@ -318,15 +343,18 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
     laws: dict[str, LawFit] = {}
     kernel = {"calls": 0, "lanes": 0, "kernel_s": 0.0, "load_s": 0.0}
     order = ["symmetric", "per-direction"] if settings.law == "auto" else [settings.law]
+    if prm.get("friction_L") == 1.0:  # LuGre: symmetric only
+        order = ["symmetric"]
     for law in order:
         t1 = time.perf_counter()
         start, fit, plant = _fit_law(law, record, use, plant_of, floors, settings.max_iter,
-                                     progress)
+                                     progress, settings.free, prm)
         unc, clusters, block = _uncertainty(fit, use, record.h_s)
         F, q, v, a = _kinematics(plant, fit.x, prm)
         adequacy = _adequacy(record, law, fit, F, q, use, clusters, block,
                              "rad/s" if cfg.axis == "rotary" else "m/s")
-        laws[law] = LawFit(law, start, fit, unc, adequacy, len(clusters), block, F, q, v, a)
+        laws[law] = LawFit(law, start, fit, unc, adequacy, len(clusters), block, F, q, v, a,
+                           _on_bound(fit, settings.free))
         for k, val in (("calls", plant.calls), ("lanes", plant.lanes_run),
                        ("kernel_s", plant.kernel_s), ("load_s", plant.load_s)):
             kernel[k] += val
@@ -350,10 +378,22 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                     {"F": bF, "q": bq, "v": bv, "a": ba}, split, use, timings, kernel)
 
 
+def _on_bound(fit: oe.OutputErrorFit, free: Mapping[str, tuple[float, float]]) -> np.ndarray:
+    """Which parameters ended within 0.1 % of the span of a bound (freed kernel parameters)."""
+    out = np.zeros(len(fit.names), dtype=bool)
+    for j, n in enumerate(fit.names):
+        if n in free:
+            lo, hi = free[n]
+            out[j] = min(fit.x[j] - lo, hi - fit.x[j]) <= 1e-3 * (hi - lo)
+    return out
+
+
 def _choose(law: str, laws: dict[str, LawFit]) -> tuple[str, str]:
     """The law reported and why."""
     if law != "auto":
         return law, "asked for"
+    if len(laws) == 1:
+        return next(iter(laws)), "the description's LuGre law is symmetric"
     sym = laws["symmetric"]
     missed = [o for o in sym.adequacy.omitted if o.missed and o.name == "Fv asymmetry"]
     if missed:
@@ -375,7 +415,7 @@ def _split(settings: PlantSettings, record: PlantRecord, use: np.ndarray, law: s
     fit_use = use & (np.arange(record.n) < cut)
     held = use & (np.arange(record.n) >= cut)
     start, fit, plant = _fit_law(law, record, fit_use, plant_of, floors, settings.max_iter,
-                                 progress)
+                                 progress, settings.free, prm)
     F, q, v, a = _kinematics(plant, fit.x, prm)
     base = idim_ls(_sliced(record, fit_use), LAW_TERMS["symmetric"])
     bF, bq, bv, ba = _kinematics(plant_of(LAW_TERMS["symmetric"]), base.theta, prm)

@@ -85,6 +85,9 @@ class ClosedLoopPlant:
         """The description's parameters with the free terms set to ``x`` (SI)."""
         out = dict(self.base)
         for name, v in zip(self.names, x, strict=True):
+            if name not in TERM_PARAMS:  # a kernel parameter freed as itself
+                out[name] = float(v)
+                continue
             for p in TERM_PARAMS[name]:
                 val = float(v) - self.mass_extra if name == "M" else float(v)
                 out[p] = val

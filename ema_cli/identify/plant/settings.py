@@ -39,6 +39,11 @@ class PlantSettings(Strict):
     split: FiniteFloat = Field(0.7, ge=0.0, lt=1.0,
                                description="share of the samples a second fit uses, the rest "
                                            "scoring it (time-split validation); 0: none")
+    free: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
+        default_factory=dict,
+        description="further kernel parameters freed with bounds, NAME -> [LO, HI] in SI (names "
+                    "of `ema params`: the load friction law's Fs_L, vs_L, sigma0_L, sigma1_L, "
+                    "...), started from the description's values")
     max_iter: PositiveInt = Field(20, le=200, description="Levenberg-Marquardt iterations "
                                                           "(cap 200)")
     validate_data: str | None = Field(None, description="another record the fitted model is "
@@ -51,6 +56,21 @@ class PlantSettings(Strict):
             key, sep, _ = item.partition("=")
             if not sep or not key.startswith("actuator."):
                 raise ValueError(f"'{item}': expected actuator.KEY=VALUE")
+        return v
+
+    @field_validator("free")
+    @classmethod
+    def _free(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        from ema_cli.identify.plant.output_error import TERM_PARAMS
+        from ema_cli.model.params import INDEX
+
+        for name, (lo, hi) in v.items():
+            if name not in INDEX:
+                raise ValueError(f"free.{name}: not a model parameter (`ema params` lists them)")
+            if name in {p for ps in TERM_PARAMS.values() for p in ps}:
+                raise ValueError(f"free.{name}: the law's terms free it already (--law)")
+            if not lo < hi:
+                raise ValueError(f"free.{name}: expected LO < HI, got [{lo}, {hi}]")
         return v
 
     def overrides(self) -> list[tuple[str, object]]:
