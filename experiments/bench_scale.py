@@ -14,6 +14,11 @@ task on a remote backend, ``production.run.TASK_UNITS``) sent one at a time; the
 the parent's wall per block minus the seconds the block ran on its worker (submission,
 serialisation both ways, scheduling, the result's transfer), median over the blocks, as a
 share of the block's median seconds.
+
+Read the rates with the machine's load: each row prints the 1-minute load average, and the
+kernel-busy workers (the seconds spent in the kernel, summed over the workers, over the wall):
+near 2 when both workers compute all the time. On 2 cores shared with other jobs, 2 busy
+workers get no more CPU than 1, and the rate does not scale although the work is spread.
 """
 
 from __future__ import annotations
@@ -36,12 +41,13 @@ TOL = ROOT / "configs" / "tolerances.yaml"
 BLOCK = 100  # the yield's default checkpoint block (api.production.DEFAULT_BLOCK) [units]
 
 
-def run(n: int, **backend: object) -> tuple[float, pd.DataFrame]:
-    """One yield of ``n`` units -> (wall [s], samples)."""
+def run(n: int, **backend: object) -> tuple[float, pd.DataFrame, float]:
+    """One yield of ``n`` units -> (wall [s], samples, seconds in the kernel summed over the
+    workers [s])."""
     t0 = time.perf_counter()
     res = production_yield(SPEC, TOL, n=n, seed=0, block=BLOCK, worst_budget=None,
                            drivers=False, **backend)
-    return time.perf_counter() - t0, res.samples
+    return time.perf_counter() - t0, res.samples, res.timings["kernel_s"]
 
 
 def overhead(scheduler: str, blocks: int, units: int) -> tuple[float, float]:
@@ -74,7 +80,8 @@ def main() -> int:
 
     threads = os.environ.get("NUMBA_NUM_THREADS", "all")
     print(f"\n== ema yield on the backends: {SPEC.name} x {TOL.name}, {args.n} units, "
-          f"checkpoint blocks of {BLOCK} (numba threads: {threads}; median of {args.repeats})")
+          f"checkpoint blocks of {BLOCK} (numba threads: {threads}; median of {args.repeats}; "
+          f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f})")
     rows, ref = [], None
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   protocol="tcp", host="127.0.0.1",
@@ -85,12 +92,13 @@ def main() -> int:
                   ("Dask, 2 workers", {"backend": "dask",
                                        "scheduler": cluster.scheduler_address})]
         for name, kw in setups:
-            cold, _ = run(2 * TASK_UNITS if kw.get("backend") in ("loky", "dask") else 4,
+            cold, _, _ = run(2 * TASK_UNITS if kw.get("backend") in ("loky", "dask") else 4,
                           **kw)
-            walls = []
+            walls, busy = [], []
             for _ in range(args.repeats):
-                wall, samples = run(args.n, **kw)
+                wall, samples, kernel_s = run(args.n, **kw)
                 walls.append(wall)
+                busy.append(kernel_s / wall)
                 if ref is None:
                     ref = samples
                 pd.testing.assert_frame_equal(samples, ref, check_exact=True)
@@ -98,7 +106,8 @@ def main() -> int:
             rows.append((name, wall, args.n / wall, cold))
             rate, base = rows[-1][2], rows[0][2]
             print(f"  {name:26s} {wall:7.1f} s  {rate:6.3f} units/s  x{rate / base:4.2f} vs 1 "
-                  f"process  (warm-up {cold:5.1f} s)", flush=True)
+                  f"process  kernel-busy workers {statistics.median(busy):4.2f}  (warm-up "
+                  f"{cold:5.1f} s; load average {os.getloadavg()[0]:.1f})", flush=True)
         over, block_s = overhead(cluster.scheduler_address, args.blocks, args.units)
     print(f"  every backend's {args.n} units: bit-identical to the first's")
     per_unit = block_s / args.units
