@@ -17,7 +17,8 @@ share of the block's median seconds.
 
 Read the rates with the machine's load: each row prints the 1-minute load average, and the
 kernel-busy workers (the seconds spent in the kernel, summed over the workers, over the wall):
-near 2 when both workers compute all the time. On 2 cores shared with other jobs, 2 busy
+near 2 when both loky or Dask workers compute all the time (the threads backend is one process
+whose kernel calls use both threads: at most 1). On 2 cores shared with other jobs, 2 busy
 workers get no more CPU than 1, and the rate does not scale although the work is spread.
 """
 
