@@ -178,7 +178,8 @@ def validate_folder(folder: str | Path, data: str | Path,
         doc = json.loads(js.read_text())
         settings = PlantSettings(**doc["settings"])
         models, delay = doc["models"], int(doc["delay_samples"])
+        inverse = doc.get("controller_check") is None
     except (ValueError, KeyError, TypeError) as exc:
         raise EmaError(f"'{js}': not a plant.json of this version ({type(exc).__name__}); "
                        "rerun `ema identify plant`") from None
-    return validate_models(settings, delay, models, data, columns)
+    return validate_models(settings, delay, models, data, columns, inverse=inverse)

@@ -132,3 +132,4 @@ def test_a_stribeck_law_freed_by_free(tmp_path):
     assert a.verdict == "NOT ADEQUATE"
     strib = next(o for o in a.omitted if o.name.startswith("Stribeck"))
     assert strib.missed and strib.coefficient > 0, a.reasons
+
