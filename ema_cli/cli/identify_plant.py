@@ -183,7 +183,8 @@ def validate_cmd(
 def _validate(folder: Path, data: Path, columns: list[str] | None) -> None:
     from ema_cli.api.identify_plant import validate_folder
 
-    v = validate_folder(folder, data, dict(parse_assignments(columns, "--columns")) or None)
+    v = validate_folder(folder, data,
+                        dict(parse_assignments(columns, "--columns")) or None).result
     console.print(f"validation on {v.record.source} ({v.record.n} samples); " + (
         f"controller check: {v.controller.summary()}" if v.controller is not None else
         "inverse model: the force predicted from the measured motion"))

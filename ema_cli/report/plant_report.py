@@ -381,3 +381,22 @@ def write_plant(fit: PlantFit, out: Path, validation: PlantValidation | None = N
     write_json(out / "manifest.json", manifest("identify plant", timings_s=fit.timings,
                                                kernel=fit.kernel, **fields))
     return files + ["manifest.json"]
+
+
+def write_validation(v: PlantValidation, out: Path, axis: str) -> list[str]:
+    """A validation's own folder: validation.md, validation.json, validation.png (when the
+    models were simulated) and manifest.json."""
+    write_text(out / "validation.md", "# Validation\n\n" + validation_markdown(v) + "\n")
+    write_json(out / "validation.json", {
+        "source": v.record.source, "errors_pct": {k: e.as_dict() for k, e in v.errors.items()},
+        "rms_position_m": v.rms_position_m,
+        "controller_check": None if v.controller is None else v.controller.as_dict()})
+    files = ["validation.md", "validation.json"]
+    if v.sims:
+        write_figure(out / "validation.png", channels_figure(
+            v.record.t_s, {"F": v.record.force_n, "q": v.record.q_m},
+            {k: {"F": s["F"], "q": s["q"]} for k, s in v.sims.items()}, axis,
+            f"Validation on {v.record.source}"))
+        files.append("validation.png")
+    write_json(out / "manifest.json", manifest("identify validate"))
+    return files + ["manifest.json"]
