@@ -123,10 +123,11 @@ class LokyPool:
         self.pool = self._pool()
 
     def _pool(self) -> Any:
-        from joblib.externals.loky import get_reusable_executor
+        """joblib's reusable loky pool (a fresh one if it broke), as joblib's own Parallel
+        gets it, so the two can follow each other in one process; no memmapping."""
+        from joblib.executor import get_memmapping_executor
 
-        return get_reusable_executor(max_workers=self.ex.workers, timeout=LOKY_IDLE_S,
-                                     reuse=True)
+        return get_memmapping_executor(self.ex.workers, timeout=LOKY_IDLE_S, max_nbytes=None)
 
     @property
     def in_flight(self) -> int:

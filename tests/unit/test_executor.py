@@ -180,3 +180,13 @@ def test_a_worker_with_other_ema_sources_refuses_the_block(tmp_path):
                                        r"process ema 0\.0\.0\+000000000000 .*same ema") as err:
         call(square_after, (3, 0.0), "process", "0.0.0+000000000000")
     assert err.value.exit_code == 1
+
+
+def test_joblib_parallel_runs_after_the_executor_in_one_process():
+    """The loky pool is joblib's own reusable one: a joblib Parallel after the executor (the
+    torque GA's runs after a yield in one session) reuses or replaces it, never breaks."""
+    from joblib import Parallel, delayed
+
+    with Executor("loky", 2) as ex:
+        assert ex.run([Task(square_after, (k, 0.0), f"b{k}") for k in range(3)]) == [0, 1, 4]
+    assert Parallel(n_jobs=2)(delayed(square_after)(k, 0.0) for k in range(3)) == [0, 1, 4]
