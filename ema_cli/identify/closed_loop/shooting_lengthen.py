@@ -106,6 +106,7 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int,
         res.sp, res.V, res.cost = sp2, st.V[0].copy(), float(st.cost[0])
         res.x = sp2.unpack(res.V)[0]
         res.lengths.append(length)
+        res.x_at[length] = res.x.copy()
     return int(st.iterations[0])
 
 
@@ -175,7 +176,8 @@ def _decide(cands: list[ShootingSearch], shifts: list[np.ndarray]) -> Lengthenin
 
 
 def _snapshot(c: ShootingSearch) -> ShootingSearch:
-    return dataclasses.replace(c, V=c.V.copy(), x=c.x.copy(), lengths=list(c.lengths))
+    return dataclasses.replace(c, V=c.V.copy(), x=c.x.copy(), lengths=list(c.lengths),
+                               x_at=dict(c.x_at))
 
 
 def lengthen_both(res: ShootingSearch, lengthen: tuple[float, ...], dt_search: float,
@@ -190,6 +192,8 @@ def lengthen_both(res: ShootingSearch, lengthen: tuple[float, ...], dt_search: f
         runner = dataclasses.replace(res, V=res.final_V[1].copy(), x=res.final_x[1].copy(),
                                      cost=float(res.final_cost[1]), lengths=[])
     cands = [res] if runner is None else [res, runner]
+    for c in cands:  # each its own record, from the search's segments on
+        c.x_at = {0.0: c.x.copy()}
     shifts = [np.zeros_like(res.x) for _ in cands]
     anchor = None
     for length in lengthen:  # longer segments from the optimum: fewer free states
@@ -210,5 +214,18 @@ def lengthen_both(res: ShootingSearch, lengthen: tuple[float, ...], dt_search: f
     return out
 
 
+def on_same_segments(best: ShootingSearch, runner: ShootingSearch
+                     ) -> tuple[float, np.ndarray, np.ndarray]:
+    """The longest segments both candidates were fitted on -> (their length [s], 0.0 for the
+    search's; the best's parameters there; the runner-up's). A runner-up whose lengthening
+    was refused is compared with the best at the length it kept, not at the best's longest:
+    the estimates on different segments differ by the free states' bias, not by optimum."""
+    common = set(best.x_at) & set(runner.x_at)
+    length = max(common) if common else 0.0
+    xb = best.x_at.get(length, best.x)
+    xr = runner.x_at.get(length, runner.x)
+    return length, xb, xr
+
+
 __all__ = ["LENGTHEN_ITER", "MIN_FIT_SEGMENTS", "MIN_SEGMENTS", "Lengthening", "continue_at",
-           "lengthen_both", "lengthened", "split_for_covariance"]
+           "lengthen_both", "lengthened", "on_same_segments", "split_for_covariance"]
