@@ -91,6 +91,9 @@ class ShootingOutcome:
     """The first samples of the segments the fit is judged and drawn on: the clusters of the
     covariance (the estimate's segments, or their parts: split_for_covariance)."""
     fell_back: bool = False  # the longest segments did not fit: the estimate is the anchor's
+    agreement: dict[str, Any] | None = None
+    """The runner-up against the best on the same segments: their length [s] (0: the
+    search's), both parameter sets, the half-widths they were compared with (SI)."""
     segment_prediction: np.ndarray | None = None
     """The fit itself: every channel as the segments predict it, each segment simulated from
     its fitted start state, at the estimate [n_ch, n_samples] (SI)."""
@@ -127,6 +130,7 @@ class ShootingOutcome:
             "stage_iterations": self.stage_iterations,
             "runner_up_won_on_longer_segments": self.runner_up_won,
             "motor_angle_tie": self.tie,
+            "runner_up_agreement": self.agreement,
         }
 
 
@@ -287,9 +291,16 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     prim = [j for j, n in enumerate(problem.names) if n not in nuisance]
     hw = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)
     compared_on = None
+    agreement = None
     if runner is not None:
         compared_on, xb_same, xr_same = on_same_segments(res, runner)
         res.agree = 1 + int(bool(np.all(np.abs(xr_same[prim] - xb_same[prim]) <= hw[prim])))
+        names = problem.names
+        agreement = {"segments_s": compared_on,
+                     "best": dict(zip(names, map(float, xb_same), strict=True)),
+                     "runner_up": dict(zip(names, map(float, xr_same), strict=True)),
+                     "half_widths": dict(zip(names, map(float, hw), strict=True)),
+                     "judged": [names[j] for j in prim]}
     else:
         res.agree = 1
     if res.agree < 2 and x_runner is not None:
@@ -338,7 +349,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                           step_shift=shift, segment_shift=seg_shift,
                           stage_iterations=iters, runner_up_won=runner_won, tie=tie,
                           fell_back=fell_back, fit_first=res_cov.sp.seg.first.copy(),
-                          segment_prediction=seg_pred)
+                          segment_prediction=seg_pred, agreement=agreement)
     if polish_iter <= 0:
         out.polish = {"kept": False, "why": "no polish (polish: false)"}
         return out
