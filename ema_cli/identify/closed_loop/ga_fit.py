@@ -401,10 +401,14 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
                 f"the cost is not smooth at the scale of the standard error: moving "
                 f"{problem.names[j]} by 1 SE raises J {ratio:.3g} x what J^T J predicts (backlash "
                 "impacts make output-error costs rugged, docs/identification.md)")
-    if not np.all(unc.determined):
-        warnings.append("not determined: " + ", ".join(
-            n for n, d in zip(problem.names, unc.determined, strict=True) if not d)
-            + " (see identification.json, parameters.*.not_determined_because)")
+    # the contact's nuisance parameters are reported (identification.json), not judged
+    judged = [n for n in problem.names
+              if not (ms is not None and settings.free_contact and n in NUISANCE)]
+    undetermined = [n for n, d in zip(problem.names, unc.determined, strict=True)
+                    if not d and n in judged]
+    if undetermined:
+        warnings.append("not determined: " + ", ".join(undetermined)
+                        + " (see identification.json, parameters.*.not_determined_because)")
     Y = problem.predict(x[None])[0]
     timings["total_s"] = time.perf_counter() - t_start
     fit = ClosedLoopFit(settings, problem, x_first, cost_first, x, float(r @ r), r, J, unc, Y,
