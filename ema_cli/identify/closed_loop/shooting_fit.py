@@ -231,6 +231,27 @@ def refine_split(lg: Lengthening, fine: float, dt_search: float, refine_iter: in
     return res, split, res.x - x_coarse, x_coarse, c_coarse
 
 
+def runner_agreement(names: tuple[str, ...], prim: list[int], hw: np.ndarray,
+                     best: ShootingSearch, runner: ShootingSearch | None
+                     ) -> tuple[int, float | None, dict[str, Any] | None]:
+    """Whether the runner-up agrees with the best -> (starts that agree: 1 or 2, the segment
+    length they were compared on [s], the record for identification.json). It agrees when,
+    carried through the same lengthening, it ends within the estimate's interval half-widths
+    ``hw`` (SI) of the best in the primary parameters ``prim``, both on the same segments:
+    the longest both kept (:func:`on_same_segments`; on other segments the two differ by the
+    free states' bias, not by optimum: the README's example compared the best on 1.6 s with
+    the runner-up on 0.8 s) and at the search's step."""
+    if runner is None:
+        return 1, None, None
+    length, xb, xr = on_same_segments(best, runner)
+    agree = 1 + int(bool(np.all(np.abs(xr[prim] - xb[prim]) <= hw[prim])))
+    return agree, length, {"segments_s": length,
+                           "best": dict(zip(names, map(float, xb), strict=True)),
+                           "runner_up": dict(zip(names, map(float, xr), strict=True)),
+                           "half_widths": dict(zip(names, map(float, hw), strict=True)),
+                           "judged": [names[j] for j in prim]}
+
+
 def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_starts: int,
                       segment_s: float, dt_search: float, seed: int, max_iter: int,
                       polish_iter: int, refine_iter: int = 15,
@@ -281,28 +302,9 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     high = too_high(ratios, notes)
     judged = [v for c, v in ratios.items() if notes[c] in JUDGED_NOTES]
     at_noise = bool(judged) and max(judged) <= AT_NOISE_RATIO
-    # the runner-up agrees when, carried through the same lengthening, it ends within the
-    # estimate's interval half-widths of the best one, both on the same segments (the
-    # longest both kept: a runner-up whose last lengthening was refused is compared with the
-    # best at the length it kept, since on other segments the two differ by the free states'
-    # bias, not by optimum; measured on the README's example: the best on 1.6 s segments and
-    # the runner-up on 0.8 s differed by 0.85 in kL, both starts agreed to 1e-4 on the same
-    # segments) and at the search's step
     prim = [j for j, n in enumerate(problem.names) if n not in nuisance]
     hw = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)
-    compared_on = None
-    agreement = None
-    if runner is not None:
-        compared_on, xb_same, xr_same = on_same_segments(res, runner)
-        res.agree = 1 + int(bool(np.all(np.abs(xr_same[prim] - xb_same[prim]) <= hw[prim])))
-        names = problem.names
-        agreement = {"segments_s": compared_on,
-                     "best": dict(zip(names, map(float, xb_same), strict=True)),
-                     "runner_up": dict(zip(names, map(float, xr_same), strict=True)),
-                     "half_widths": dict(zip(names, map(float, hw), strict=True)),
-                     "judged": [names[j] for j in prim]}
-    else:
-        res.agree = 1
+    res.agree, compared_on, agreement = runner_agreement(problem.names, prim, hw, res, runner)
     if res.agree < 2 and x_runner is not None:
         # two optima the search cannot choose between: the intervals (printed with "not
         # determined") span both, each with the estimate's half-widths, not the best alone
