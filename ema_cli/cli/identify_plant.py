@@ -150,22 +150,18 @@ def _plant(data: Path, actuator: Path, config: Path | None, columns: list[str] |
            law: str | None, delay: str | None, window: str | None, split: float | None,
            validate: Path | None, set_: list[str] | None, out: Path | None,
            free: list[str] | None = None) -> None:
-    from ema_cli.api.identify_plant import PlantIdentification, plant_inputs, plant_settings
-    from ema_cli.identify.plant.fit import run_plant
-    from ema_cli.identify.plant.validation import validate as validate_fit
+    from ema_cli.api.identify_plant import identify_plant, plant_inputs, plant_settings
     from ema_cli.report.rundir import check_output
 
     pairs = [("data", str(data)), ("actuator", str(actuator)),
              *_pairs(columns, set_, law, delay, window, split, validate, free)]
     settings = plant_settings(config, pairs)
     check_output(out, "identify", plant_inputs(settings))
-    report_stage("reading the record, checking the controller, IDIM-LS")
-    fit = run_plant(settings, report_stage)
-    v = None
-    if settings.validate_data:
-        report_stage("validating on " + Path(settings.validate_data).name)
-        v = validate_fit(fit, settings.validate_data)
-    ident = PlantIdentification(fit, v)
+    report_stage("reading the record, checking the controller, IDIM-LS"
+                 + (f"; validation on {Path(settings.validate_data).name}"
+                    if settings.validate_data else ""))
+    # through the API (cli -> api -> compute), which runs the fit and the validation
+    ident = identify_plant(config=config, overrides=pairs, progress=report_stage)
     report_stage("writing files and figures")
     folder = ident.save(out)
     _print(ident, folder)

@@ -172,3 +172,30 @@ def test_registering_a_subcommand_is_one_pair(monkeypatch):
     assert r.exit_code == 0 and "extra ran" in r.output, r.output
     r = runner.invoke(root, ["identify", "--help"], env={"COLUMNS": "100"})
     assert "with a summary longer than click's 45 characters" in " ".join(r.output.split())
+
+
+@pytest.mark.parametrize(("ref", "needles"), [
+    (None, ["log.csv", "theta_ref_deg"]),  # the actuation (command) channel missing
+    ("const", ["log.csv", "theta_ref_deg", "is constant", "does not excite"]),
+])
+def test_a_missing_or_constant_command_is_one_line_naming_file_and_channel(
+        tmp_path, capsys, ref, needles):
+    import numpy as np
+
+    t = np.arange(200) * 1e-3
+    cols = {"t_s": t, "theta_load_deg": np.sin(20 * t)}
+    if ref == "const":
+        cols["theta_ref_deg"] = np.full_like(t, 2.0)
+    log = tmp_path / "log.csv"
+    names = list(cols)
+    log.write_text(",".join(names) + "\n" + "\n".join(
+        ",".join(f"{cols[c][i]:.6g}" for c in names) for i in range(t.shape[0])) + "\n")
+    code = main.run(["identify", "closed-loop", "--data", str(log),
+                     "--out", str(tmp_path / "never")])
+    cap = capsys.readouterr()
+    lines = [ln for ln in (cap.out + cap.err).splitlines()
+             if ln.strip() and not ln.startswith("identify: ")]  # progress lines apart
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error:"), lines
+    for n in needles:
+        assert n in lines[0], lines[0]
+    assert not (tmp_path / "never").exists()
