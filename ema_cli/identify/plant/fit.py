@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,12 +24,19 @@ from ema_cli.identify.plant import adequacy as adq
 from ema_cli.identify.plant import output_error as oe
 from ema_cli.identify.plant.benchmark import BenchmarkErrors, relative_error_pct
 from ema_cli.identify.plant.controller_check import (
-    ControllerCheck,
     check_controller,
     chosen_delay,
 )
 from ema_cli.identify.plant.idim import BENCHMARK, IdimEstimate, filtered_kinematics, idim_ls
 from ema_cli.identify.plant.records import PlantRecord, read_plant_record
+from ema_cli.identify.plant.result import (
+    LAW_TERMS,
+    LawFit,
+    PlantFit,
+    choose_law,
+    mask,
+    sliced,
+)
 from ema_cli.identify.plant.settings import PlantSettings
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
 
@@ -40,84 +46,7 @@ MIN_CLUSTERS = 20  # independent residual blocks a verdict needs [-]
 BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
 BLOCK_MIN_S = 0.25  # ... and at least this long [s]
 SAMPLE_TOL = 0.01  # the record's sample interval may differ from the controller's by 1 % [-]
-LAW_TERMS = {"symmetric": ("M", "Fv", "Fc", "OF"), "per-direction": ("M", "Fv+", "Fc+", "Fv-",
-                                                                    "Fc-")}
 
-
-@dataclass
-class LawFit:
-    """One law fitted by output error: the IDIM-LS start, the fit, its uncertainty and
-    adequacy, and the simulated channels at the estimate."""
-
-    law: str
-    start: IdimEstimate
-    fit: oe.OutputErrorFit
-    uncertainty: Uncertainty
-    adequacy: adq.Adequacy
-    clusters: int
-    block_s: float
-    F: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    on_bound: np.ndarray
-
-    @property
-    def estimate(self) -> dict[str, float]:
-        """Term -> value (SI)."""
-        return {n: float(v) for n, v in zip(self.fit.names, self.fit.x, strict=True)}
-
-    def status(self, j: int) -> str:
-        """Parameter j: ``determined``, ``zero within its interval`` (a force term of the law
-        the data do not need), ``on its bound`` or ``NOT DETERMINED: why``."""
-        u = self.uncertainty
-        n = u.names[j]
-        if n not in oe.TERM_PARAMS and self.on_bound[j]:
-            return "NOT DETERMINED: on its bound"
-        zero = bool(np.isfinite(u.se[j]) and u.ci_low[j] <= 0 <= u.ci_high[j])
-        if zero and n in oe.TERM_PARAMS and n != "M":
-            return "zero within its interval"
-        if u.determined[j] and not zero:
-            return "determined"
-        why = list(u.reasons[j]) or ["its 95 % interval contains 0"]
-        return "NOT DETERMINED: " + "; ".join(why)
-
-    def determined(self) -> tuple[bool, list[str]]:
-        """(every parameter determined or zero within its interval, the undetermined ones)."""
-        u = self.uncertainty
-        bad = [n for j, n in enumerate(u.names) if self.status(j).startswith("NOT")]
-        return not bad, bad
-
-
-@dataclass
-class PlantFit:
-    """The identification (module docstring). ``laws`` every law fitted, ``chosen`` the one
-    reported, ``baseline`` IDIM-LS of the symmetric law (the benchmark's reference model),
-    ``errors`` the benchmark's relative errors on the fitted samples (``output error`` and
-    ``IDIM-LS``), ``split`` the time-split validation, ``t`` and the measured channels."""
-
-    settings: PlantSettings
-    record: PlantRecord
-    extras: dict[str, Any]
-    axis: str
-    controller: ControllerCheck | None
-    delay: int
-    baseline: IdimEstimate
-    laws: dict[str, LawFit]
-    chosen: str
-    choice: str
-    errors: dict[str, BenchmarkErrors]
-    baseline_sim: dict[str, np.ndarray]
-    split: dict[str, Any] | None
-    use: np.ndarray
-    timings: dict[str, float]
-    kernel: dict[str, float]
-    mode: str = "closed-loop output error"
-
-    @property
-    def best(self) -> LawFit:
-        """The chosen law's fit."""
-        return self.laws[self.chosen]
 
 
 def _description(settings: PlantSettings) -> tuple[Any, dict[str, Any], Callable, dict]:
@@ -205,20 +134,6 @@ def _kinematics(plant: oe.ClosedLoopPlant, x: np.ndarray, prm: dict) -> tuple[np
     return plant.motion(np.asarray(x, dtype=np.float64))
 
 
-def _mask(record: PlantRecord, window: tuple[float, float] | None, first: int) -> np.ndarray:
-    use = np.ones(record.n, dtype=bool)
-    use[:first] = False
-    if window is not None:
-        t0, t1 = window
-        if not (t0 < t1):
-            raise EmaError(f"--window {t0:g},{t1:g}: expected T0 < T1 [s]")
-        if t0 < record.t_s[0] or t1 > record.t_s[-1] + 1e-9:
-            raise EmaError(f"--window {t0:g},{t1:g}: {record.source} spans 0 to "
-                           f"{record.t_s[-1]:.6g} s; expected a window inside it")
-        use &= (record.t_s >= t0) & (record.t_s <= t1)
-    return use
-
-
 def benchmark_errors_on(record: PlantRecord, idx: np.ndarray, q_s: np.ndarray,
                         v_s: np.ndarray, a_s: np.ndarray, F_s: np.ndarray) -> BenchmarkErrors:
     """The benchmark's four relative errors [%] (``Simulation_EMPS.m``: simulated against the
@@ -269,23 +184,12 @@ def _adequacy(record: PlantRecord, law: str, fit: oe.OutputErrorFit, F: np.ndarr
     return adq.judge(a, len(clusters), MIN_CLUSTERS)
 
 
-def _sliced(record: PlantRecord, use: np.ndarray) -> PlantRecord:
-    """The record restricted to the contiguous span of ``use`` (for IDIM-LS on a window)."""
-    idx = np.flatnonzero(use)
-    a, b = int(idx[0]), int(idx[-1]) + 1
-    a = max(a - BENCHMARK.first_sample, 0)  # IDIM drops its own border from the span's start
-    return PlantRecord(record.t_s[a:b], record.q_m[a:b], record.force_n[a:b], record.h_s,
-                       record.source, record.names, record.one_based,
-                       None if record.reference_m is None else record.reference_m[a:b],
-                       record.constants)
-
-
 def _fit_law(law: str, record: PlantRecord, use: np.ndarray, plant_of: Callable,
              ch_floor: tuple[float, float], max_iter: int, progress: Callable | None,
              free: Mapping[str, tuple[float, float]], prm: Mapping[str, float]
              ) -> tuple[IdimEstimate, oe.OutputErrorFit, oe.ClosedLoopPlant]:
     law_terms = LAW_TERMS[law]
-    start = idim_ls(_sliced(record, use), law_terms)
+    start = idim_ls(sliced(record, use), law_terms)
     terms = (*law_terms, *free)
     plant = plant_of(terms)
     ch = oe.Channels(record.force_n, record.q_m, use, *ch_floor)
@@ -339,7 +243,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                              extras["unit"], extras.get("disturbance"), first=first)
     delay = chosen_delay(check, settings.delay, record.source)
     timings["read_and_check"] = time.perf_counter() - t0
-    use = _mask(record, settings.window, first)
+    use = mask(record, settings.window, first)
     # the slowest time constant to identify, from the description's nominal values
     mass = prm.get("JL", 0.0) + prm.get("m", 1.0) ** 2 * prm.get("Jm", 0.0)
     fv = max(prm.get("Fv_L", 0.0), prm.get("Fv_L_neg", 0.0))
@@ -350,7 +254,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                        f"({np.count_nonzero(use)} samples), shorter than the axis' mechanical "
                        f"time constant M/Fv = {tau:.4g} s (the slowest to identify; at least 100 "
                        "samples); expected a longer --window")
-    baseline = idim_ls(_sliced(record, use), LAW_TERMS["symmetric"])
+    baseline = idim_ls(sliced(record, use), LAW_TERMS["symmetric"])
     floors = (oe.command_floor(record.force_n), oe.encoder_floor(record.q_m))
 
     def plant_of(terms: tuple[str, ...]) -> oe.ClosedLoopPlant:
@@ -375,7 +279,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                        ("kernel_s", plant.kernel_s), ("load_s", plant.load_s)):
             kernel[k] += val
         timings[f"fit_{law}"] = time.perf_counter() - t1
-    chosen, choice = _choose(settings.law, laws)
+    chosen, choice = choose_law(settings.law, laws)
     # the baseline: IDIM-LS of the symmetric law simulated in the same closed loop
     bplant = plant_of(LAW_TERMS["symmetric"])
     bF, bq, bv, ba = _kinematics(bplant, baseline.theta, prm)
@@ -404,23 +308,6 @@ def _on_bound(fit: oe.OutputErrorFit, free: Mapping[str, tuple[float, float]]) -
     return out
 
 
-def _choose(law: str, laws: dict[str, LawFit]) -> tuple[str, str]:
-    """The law reported and why."""
-    if law != "auto":
-        return law, "asked for"
-    if len(laws) == 1:
-        return next(iter(laws)), "the description's LuGre law is symmetric"
-    sym = laws["symmetric"]
-    missed = [o for o in sym.adequacy.omitted if o.missed and o.name == "Fv asymmetry"]
-    if missed:
-        o = missed[0]
-        return "per-direction", (f"the symmetric law misses the viscous asymmetry (t = "
-                                 f"{o.t:.3g}; it lowers the force residual by "
-                                 f"{100 * o.gain:.3g} %)")
-    return "symmetric", "the per-direction terms are not called for (the symmetric law's " \
-        "residual shows no significant viscous asymmetry)"
-
-
 def _split(settings: PlantSettings, record: PlantRecord, use: np.ndarray, law: str,
            plant_of: Callable, floors: tuple[float, float], prm: dict,
            progress: Callable | None) -> dict[str, Any]:
@@ -433,7 +320,7 @@ def _split(settings: PlantSettings, record: PlantRecord, use: np.ndarray, law: s
     start, fit, plant = _fit_law(law, record, fit_use, plant_of, floors, settings.max_iter,
                                  progress, settings.free, prm)
     F, q, v, a = _kinematics(plant, fit.x, prm)
-    base = idim_ls(_sliced(record, fit_use), LAW_TERMS["symmetric"])
+    base = idim_ls(sliced(record, fit_use), LAW_TERMS["symmetric"])
     bF, bq, bv, ba = _kinematics(plant_of(LAW_TERMS["symmetric"]), base.theta, prm)
     hidx = np.flatnonzero(held)
     return {"share": settings.split, "t_split_s": float(record.t_s[cut]),

@@ -12,7 +12,7 @@ held-out part of a time split and on another record.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -28,10 +28,15 @@ from ema_cli.identify.plant.idim import (
     idim_ls,
 )
 from ema_cli.identify.plant.records import PlantRecord
+from ema_cli.identify.plant.result import (
+    LAW_TERMS,
+    LawFit,
+    PlantFit,
+    choose_law,
+    mask,
+    sliced,
+)
 from ema_cli.identify.plant.settings import PlantSettings
-
-if TYPE_CHECKING:
-    from ema_cli.identify.plant.fit import PlantFit
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
 
 BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
@@ -111,22 +116,13 @@ def run_inverse(settings: PlantSettings, cfg: Any, record: PlantRecord, extras: 
                 why: str, t0: float) -> PlantFit:
     """The inverse model alone (``plant.inverse``): every law by IDIM-LS with the two-part
     verdict, the time split scored by the force prediction error."""
-    from ema_cli.identify.plant.fit import (
-        LAW_TERMS,
-        LawFit,
-        PlantFit,
-        _choose,
-        _mask,
-        _sliced,
-    )
-
     if settings.free:
         raise EmaError(f"free: {', '.join(settings.free)} need the closed loop ({why}); "
                        "expected a reference channel and a discrete controller in the "
                        "description")
     rotary = cfg.axis == "rotary"
-    use = _mask(record, settings.window, BENCHMARK.first_sample)
-    sub = _sliced(record, use)
+    use = mask(record, settings.window, BENCHMARK.first_sample)
+    sub = sliced(record, use)
     kin = filtered_kinematics(record.q_m, record.h_s, BENCHMARK)
     laws: dict[str, LawFit] = {}
     order = ["symmetric", "per-direction"] if settings.law == "auto" else [settings.law]
@@ -139,7 +135,7 @@ def run_inverse(settings: PlantSettings, cfg: Any, record: PlantRecord, extras: 
         F[a0:a0 + sub.n] = F_sub
         laws[law] = LawFit(law, est, fit, unc, ad, g, block, F, record.q_m, kin.dq_m_s,
                            kin.ddq_m_s2, np.zeros(len(terms), dtype=bool))
-    chosen, choice = _choose(settings.law, laws)
+    chosen, choice = choose_law(settings.law, laws)
     nan = float("nan")
     errors = {f"IDIM-LS ({lw})": BenchmarkErrors(nan, nan, nan, lf.start.relative_error_pct)
               for lw, lf in laws.items()}
@@ -149,11 +145,11 @@ def run_inverse(settings: PlantSettings, cfg: Any, record: PlantRecord, extras: 
         cut = idx[int(settings.split * idx.size)]
         first = use & (np.arange(record.n) < cut)
         held = use & (np.arange(record.n) >= cut)
-        est = idim_ls(_sliced(record, first), LAW_TERMS[chosen])
+        est = idim_ls(sliced(record, first), LAW_TERMS[chosen])
         split = {"share": settings.split, "t_split_s": float(record.t_s[cut]),
                  "estimate": dict(zip(est.names, map(float, est.theta), strict=True)),
                  "errors": {f"IDIM-LS ({chosen}), force prediction": BenchmarkErrors(
-                     nan, nan, nan, prediction_pct(_sliced(record, held), LAW_TERMS[chosen],
+                     nan, nan, nan, prediction_pct(sliced(record, held), LAW_TERMS[chosen],
                                                    est.theta))},
                  "held_out_samples": int(np.count_nonzero(held))}
     baseline = laws["symmetric"].start if "symmetric" in laws else laws[chosen].start
