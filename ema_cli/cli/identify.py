@@ -255,6 +255,18 @@ def print_identification(ident: Identification, folder: Path) -> None:
         + ("c fitted" if res.problem.fit_c else f"c fixed at {res.problem.c_fixed:.6g} N·m·s/rad"))
     evals = res.runs[0].evaluations
     per_run = sum(r.wall_time_s for r in res.runs) / len(res.runs)
+    if res.adequacy is not None:
+        console.print(f"Eq. 8 {res.adequacy.line()}")
+    tf = res.terms_fit
+    if tf is not None:
+        console.print(f"with terms {', '.join(tf.model.terms)} ({tf.model.form} form; "
+                      f"intervals: block jackknife, {tf.uncertainty.dof} dof):")
+        for n, v in tf.intervals().items():
+            zero = "  (0 inside: not needed)" if v["zero_inside"] and n not in (
+                "kL", "alpha", "c", "lam_t") else ""
+            console.print(f"  {n:8s} {v['value']:+.6g} {v['unit']}  95 % [{v['ci95'][0]:+.4g},"
+                          f" {v['ci95'][1]:+.4g}]{zero}")
+        console.print(f"with terms {tf.adequacy.line()}")
     console.print(
         f"{len(res.runs)} run(s) × {evals:,} evaluations, {per_run:.3f} s per run; exact "
         f"solver {opt.wall_time_s * 1e3:.1f} ms; total {res.wall_time_s:.2f} s -> {folder}")

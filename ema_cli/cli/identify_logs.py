@@ -249,5 +249,13 @@ def _friction_sweep(config: Path | None, pairs: list[tuple[str, Any]],
            fit.data.truth)
     for w in fit.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
-    console.print(f"residual std {js['cost']['residual_std_nm']:.4g} N·m; sigma0 is not "
-                  f"identifiable at constant speed; {fit.wall_time_s:.2f} s -> {folder}")
+    sel = js["selection"]
+    console.print(f"law: {fit.chosen}: {sel['why']} ({sel['rule']})")
+    for k, v in js["differences_neg_minus_pos"].items():
+        console.print(f"  {k}: {v['value']:+.4g} [{v['ci95'][0]:+.4g}, {v['ci95'][1]:+.4g}]"
+                      + ("  (0 inside)" if v["zero_inside"] else ""))
+    if fit.adequacy is not None:
+        console.print(fit.adequacy.line())
+    console.print(f"speeds in {fit.data.speed_unit}, friction in {fit.data.force_unit}; "
+                  f"symmetric LuGre residual std {js['cost']['residual_std_nm']:.4g}; sigma0 "
+                  f"is not identifiable at constant speed; {fit.wall_time_s:.2f} s -> {folder}")

@@ -43,7 +43,6 @@ from ema_cli.identify.shape_adequacy import (
 )
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
 from ema_cli.model.lugre import steady_friction_nb, stribeck_nb
-from ema_cli.units import RPM
 
 SWEEP_COLUMNS = ("omega_rpm", "torque_nm")
 """Columns of a friction-sweep CSV: motor speed [rpm], steady friction torque [N*m]."""

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from ema_cli.errors import EmaError
+from ema_cli.identify.shape_adequacy import Adequacy
 from ema_cli.identify.torque.data import (
     MIN_CONTACT_SAMPLES,
     IdentData,
@@ -27,7 +28,6 @@ from ema_cli.identify.torque.data import (
 )
 from ema_cli.identify.torque.exact import ExactResult, profile, solve_exact
 from ema_cli.identify.torque.problem import PARAM_UNITS, TorqueProblem
-from ema_cli.identify.shape_adequacy import Adequacy
 from ema_cli.identify.torque.settings import IdentifySettings
 from ema_cli.identify.torque.terms import TermsFit, fit_terms, torque_adequacy
 from ema_cli.model.params import CONTACT_TAU
