@@ -188,7 +188,10 @@ class LogTable:
         not a variable is read as a selector (module docstring)."""
         p = self.path
         if name not in self.raw and self.fmt.startswith("MATLAB"):
-            sel = parse_selector(name)
+            try:
+                sel = parse_selector(name)
+            except EmaError as exc:
+                raise EmaError(f"data file '{p}': {exc.message}") from None
             if sel is None:
                 raise EmaError(f"data file '{p}': no variable '{name}'; it has "
                                f"{self.listing()}")

@@ -37,6 +37,7 @@ LOF_ALPHA = 0.01  # level of the lack-of-fit F-test (repeats) [-]
 MAD_NORMAL = 0.6744897501960817  # MAD of a standard normal [-]
 MIN_SCATTER_DOF = 3  # fewest degrees of freedom of a scatter estimate [-]
 REPEAT_RTOL = 1e-9  # abscissae equal within this relative tolerance are repeats [-]
+MAX_WHERE = 3  # failing regions named in the verdict line, the worst first [regions]
 DIFF_AGREE = 1.25  # 2nd- and 3rd-difference noise estimates within this factor: white [-]
 
 
@@ -76,9 +77,16 @@ class Adequacy:
         return [r for r in self.regions if r.ratio >= MISFIT_RATIO]
 
     def where(self) -> str:
-        """The failing regions in words ('' when none)."""
-        return "; ".join(f"{r.label}: residual RMS {r.rms:.3g} {self.unit} = {r.ratio:.1f}x "
-                         f"the scatter, mean {r.mean:+.3g}" for r in self.failing)
+        """The failing regions in words, the worst MAX_WHERE of them ('' when none)."""
+        bad = sorted(self.failing, key=lambda r: -r.ratio)
+        if not bad:
+            return ""
+        head = (f"all {len(bad)} regions, worst " if len(bad) == len(self.regions) > 1
+                else f"{len(bad)} of {len(self.regions)} regions, worst " if len(bad) > 1
+                else "")
+        return head + "; ".join(f"{r.label}: residual RMS {r.rms:.3g} {self.unit} = "
+                                f"{r.ratio:.1f}x the scatter, mean {r.mean:+.3g}"
+                                for r in bad[:MAX_WHERE])
 
     def line(self) -> str:
         """One line for the console and the summary."""

@@ -217,7 +217,7 @@ def terms_figure(res: IdentificationResult) -> Figure:
     a_scale = PLOT_UNITS["alpha"][2]
     fig, (a0, a1) = subplots(1, 2, figsize=(14, 5.0))
     dth = data.dth[::step] * a_scale
-    a0.plot(dth, data.torque[::step], "o", color="0.6", ms=2.5, mew=0, label="measured")
+    a0.plot(dth, data.torque[::step], "o", color="0.7", ms=5, mew=0, label="measured")
     a0.plot(dth, res.problem.model_torque(res.optimum.x)[::step], ".", color="C0", ms=1.2,
             label="Eq. 8 (least-squares optimum)")
     a0.plot(dth, tf.model.torque_model(tf.x)[::step], ".", color="C1", ms=1.2,
