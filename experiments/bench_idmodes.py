@@ -68,9 +68,10 @@ def friction(seeds: int) -> None:
             n_cover += tv.size
         print(f"friction, {name} data, {seeds} seeds: chosen {dict(chosen)}; shape of the "
               f"chosen law {dict(verdict)}; of the symmetric Stribeck law {dict(sym_verdict)}")
+        which = "per-direction" if name == "asymmetric" else "symmetric"
         print(f"  per-direction differences holding 0: {zero_diff}/{4 * seeds}; truth inside "
-              f"the 95 % intervals of the {'per-direction' if name == 'asymmetric' else 'symmetric'}"
-              f" law: {cover}/{n_cover}; median time {statistics.median(times):.3f} s")
+              f"the 95 % intervals of the {which} law: {cover}/{n_cover}; median time "
+              f"{statistics.median(times):.3f} s")
 
 
 def twist() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
