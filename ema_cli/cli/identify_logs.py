@@ -71,7 +71,8 @@ def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
 
 def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> None:
     """Print the identified parameters: value, SE and 95 % interval with units, whether the
-    data determine each, and the truth and error of synthetic data."""
+    data determine each ("nuisance": the contact's parameters freed unless stated, reported
+    but not judged), and the truth and error of synthetic data."""
     from ema_cli.cli.output import print_table
     from ema_cli.units import fmt_num
 
@@ -83,7 +84,8 @@ def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) 
         u = v["unit"]
         row = [n, fmt_num(v["value"], u, 6), fmt_num(v["standard_error"], u, 3),
                f"[{fmt_num(v['ci95'][0], '', 6)}, {fmt_num(v['ci95'][1], u, 6)}]",
-               "yes" if v["determined"] else "NOT DETERMINED"]
+               "nuisance" if v.get("role") == "nuisance"
+               else "yes" if v["determined"] else "NOT DETERMINED"]
         if truth:
             t = truth.get(n)
             row += ["unknown" if t is None else fmt_num(t, u, 6),
@@ -224,6 +226,13 @@ def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | 
                    else "[red]optimum NOT confirmed[/] (see the warning)")
         console.print(f"{verdict}: {ms.search.agree} of {len(ms.search.final_cost)} finishing "
                       f"starts agree; estimate from the {ms.source}")
+        ad = js.get("adequacy")
+        if ad is not None:
+            fits = ", ".join(f"{c} {v['fit_percent']:.4g} %" for c, v in ad["channels"].items())
+            console.print(("[green]model adequate[/]: residuals white and independent of the "
+                           "command on every judged channel" if ad["adequate"] else
+                           "[red]model NOT adequate[/] (see the warning)")
+                          + f"; fit {fits}")
         first = (f"multiple shooting {t['search_s'] - t['polish_s']:.1f} s "
                  f"({fit.ga_throughput / 1e6:.1f} M steps/s)")
     else:

@@ -204,6 +204,7 @@ class ShootingSearch:
     iterations            LM iterations of the best start
     history               the best cost after each iteration
     timings               seconds per stage
+    lengths, x_at         the lengths it was continued to, its parameters on each
     """
 
     sp: ShootingProblem
@@ -219,6 +220,9 @@ class ShootingSearch:
     timings: dict[str, float]
     lengths: list[float] = field(default_factory=list)  # segment lengths continued to [s]
     final_V: np.ndarray | None = None  # scaled unknowns of the finishing starts, best first
+    x_at: dict[float, np.ndarray] = field(default_factory=dict)
+    """The parameters on the search's segments (key 0.0) and after each kept lengthening
+    (key: the length [s]): two candidates are compared on the same segments."""
 
 
 def sobol_starts(lower: np.ndarray, upper: np.ndarray, n: int, seed: int) -> np.ndarray:
