@@ -68,8 +68,10 @@ def result_table(res: IdentificationResult) -> None:
 
 
 ColumnsOpt = Annotated[list[str] | None, typer.Option(
-    "--columns", help="Map a column, repeatable. Torque data: NAME=FILE_COLUMN, e.g. "
-                      "torque_nm=T_meas. --closed-loop: CHANNEL=COLUMN[:UNIT], e.g. "
+    "--columns", help="Map a column, repeatable. Torque data: NAME=COLUMN[:UNIT], e.g. "
+                      "torque_nm=T_meas:mN*m; --friction-sweep: omega_rpm=v:mm/s, "
+                      "torque_nm=F:N; .mat: a selector rec.data[:, 2]. --closed-loop: "
+                      "CHANNEL=COLUMN[:UNIT], e.g. "
                       "theta_load_deg=pos:rad, t_s=time:ms; units: time s|ms|us, angle "
                       "deg|rad|mrad, speed rpm|rad/s|deg/s, current A|mA, voltage V|mV "
                       "(default: the channel's own).")]
@@ -85,8 +87,9 @@ ClosedLoopOpt = Annotated[bool, typer.Option(
                           "shooting, default) or GA then least squares (--method ga)."
 )]
 FrictionSweepOpt = Annotated[bool, typer.Option(
-    "--friction-sweep", help="Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a "
-                             "constant-speed sweep (--data SWEEP.csv: omega_rpm, torque_nm)."
+    "--friction-sweep", help="Fit a friction law (Coulomb or Stribeck, symmetric or per "
+                             "direction; BIC) to a constant-speed sweep (--data SWEEP: "
+                             "omega_rpm, torque_nm, or mapped by --columns)."
 )]
 MakeDataOpt = Annotated[str | None, typer.Option(
     "--make-data", help="Write synthetic data with stated truths: closed-loop (a 4 s chirp "
@@ -138,8 +141,16 @@ RunsOpt = Annotated[int | None, typer.Option(
 JobsOpt = Annotated[int | None, typer.Option(
     "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1).")]
 TorqueDataOpt = Annotated[Path | None, typer.Option(
-    "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
-                   "(default: synthetic data from the simulator).")]
+    "--data", help="CSV, Parquet or .mat with t_s, dtheta_rad, torque_nm [, domega_rad_s: "
+                   "derived when absent], or mapped by --columns (default: synthetic data "
+                   "from the simulator).")]
+TermsOpt = Annotated[str | None, typer.Option(
+    "--terms", metavar="T1,T2", help="Terms added to Eq. 8 in a second fit: offset (twist "
+    "offset), friction (+-Ft by the twist rate's sign) or dahl (the Dahl path), preload; "
+    "each at zero within its interval when not needed (docs/identification.md).")]
+LawsOpt = Annotated[str | None, typer.Option(
+    "--laws", metavar="L1,L2", help="--friction-sweep: candidate laws among coulomb, "
+    "coulomb-dir, stribeck, stribeck-dir (default all; the lowest BIC is chosen).")]
 NoiseOpt = Annotated[float | None, typer.Option(
     "--noise", help="Synthetic data: Gaussian noise, % of the torque RMS (seeded).")]
 DampingOpt = Annotated[str | None, typer.Option(
@@ -201,6 +212,8 @@ def identify_cmd(
     make_data: MakeDataOpt = None,
     starts: StartsOpt = None,
     free: FreeOpt = None,
+    terms: TermsOpt = None,
+    laws: LawsOpt = None,
 ) -> None:
     """The torque-data identification (as `ema identify torque`), or with --closed-loop,
     --friction-sweep or --make-data KIND the log modes (as `ema identify closed-loop`,
@@ -215,20 +228,26 @@ def identify_cmd(
                        "--method": method if not closed_loop else None, "--runs": runs,
                        "--n-jobs": n_jobs,
                        "--damping": damping, "--model": model, "--c": c,
-                       "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits}
+                       "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits,
+                       "--terms": terms}
         run_log_mode(modes, config=config, data=data, noise=noise, seed=seed, pop=pop,
                      generations=generations, set_=set_, out=out, free=free,
                      make_data=make_data, columns=columns, window=window,
                      method=method if closed_loop else None, starts=starts,
-                     torque_only=[k for k, v in torque_only.items() if v is not None])
+                     torque_only=[k for k, v in torque_only.items() if v is not None],
+                     laws=laws)
         return
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")
+    if laws is not None:
+        raise EmaError("--laws applies to --friction-sweep, not to the torque-data "
+                       "identification")
     run_torque(config, k_range=k_range, alpha_range=alpha_range, c_range=c_range,
                method=method, runs=runs, n_jobs=n_jobs, data=data, columns=columns,
                noise=noise, damping=damping, model=model, c=c, fit_c=fit_c, seed=seed,
-               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out)
+               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out,
+               terms=terms)
 
 
 @identify_errors
@@ -244,8 +263,10 @@ def torque_cmd(
     n_jobs: JobsOpt = None,
     data: TorqueDataOpt = None,
     columns: Annotated[list[str] | None, typer.Option(
-        "--columns", help="Map a column of --data, repeatable: NAME=FILE_COLUMN, e.g. "
-                          "torque_nm=T_meas.")] = None,
+        "--columns", help="Map a column of --data, repeatable: NAME=COLUMN[:UNIT], e.g. "
+                          "torque_nm=T_meas:mN*m, dtheta_rad=rec.data[:, 1]:arcmin (units: "
+                          "time s|ms|us, twist rad|mrad|deg|arcmin, rate rad/s|deg/s|rpm, "
+                          "torque N*m|Nm|mN*m|mNm|kN*m).")] = None,
     noise: NoiseOpt = None,
     damping: DampingOpt = None,
     model: ModelOpt = None,
@@ -259,6 +280,7 @@ def torque_cmd(
     bits: BitsOpt = None,
     set_: SetOpt = None,
     out: OutOpt = None,
+    terms: TermsOpt = None,
 ) -> None:
     """Gear stiffness kL and half backlash alpha (and damping c) from transmission torque data
     (paper §3.1, Eq. 8) with a GA, beside the exact least-squares optimum; synthetic data or
@@ -269,7 +291,8 @@ def torque_cmd(
     run_torque(config, k_range=k_range, alpha_range=alpha_range, c_range=c_range,
                method=method, runs=runs, n_jobs=n_jobs, data=data, columns=columns,
                noise=noise, damping=damping, model=model, c=c, fit_c=fit_c, seed=seed,
-               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out)
+               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out,
+               terms=terms)
 
 
 def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range | None,
@@ -278,7 +301,8 @@ def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range
                noise: float | None, damping: str | None, model: str | None, c: float | None,
                fit_c: bool | None, seed: int | None, pop: int | None,
                generations: int | None, pc: float | None, pm: float | None,
-               bits: int | None, set_: list[str] | None, out: Path | None) -> None:
+               bits: int | None, set_: list[str] | None, out: Path | None,
+               terms: str | None = None) -> None:
     """Check the options of the torque-data identification, run it, write its folder and
     print its table (both spellings: `ema identify torque` and `ema identify [CONFIG]`)."""
     from ema_cli.api.identification import identification_inputs, identify, load_settings
@@ -302,7 +326,9 @@ def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range
         "runs": runs, "n_jobs": n_jobs, "data": str(data) if data is not None else None,
         "synthetic.noise_pct": noise, "synthetic.damping": damping, "model": model, "c": c,
         "fit_c": fit_c, "seed": seed, "ga.pop": pop, "ga.generations": generations,
-        "ga.pc": pc, "ga.pm": pm, "ga.bits": bits}, set_, columns)
+        "ga.pc": pc, "ga.pm": pm, "ga.bits": bits,
+        "terms": None if terms is None else [t.strip() for t in terms.split(",") if t.strip()]},
+        set_, columns)
     settings = load_settings(config, pairs)
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
@@ -375,21 +401,29 @@ def friction_sweep_cmd(
     config: Annotated[Path | None, typer.Argument(
         help="YAML settings of the friction fit; options below override it.")] = None,
     data: Annotated[Path | None, typer.Option(
-        "--data", help="The sweep: CSV with omega_rpm, torque_nm (steady friction torque at "
-                       "constant motor speeds).")] = None,
+        "--data", help="The sweep: CSV, Parquet or .mat with omega_rpm, torque_nm (steady "
+                       "friction at constant speeds, any order, repeats welcome), or mapped "
+                       "by --columns.")] = None,
+    columns: Annotated[list[str] | None, typer.Option(
+        "--columns", help="Map a column, repeatable: omega_rpm|torque_nm=COLUMN[:UNIT], e.g. "
+                          "omega_rpm=v:mm/s, torque_nm=F:N (speed rpm|rad/s|deg/s|m/s|mm/s, "
+                          "friction N*m|Nm|mN*m|mNm|N|kN; m/s, mm/s, N, kN: a linear "
+                          "sweep).")] = None,
+    laws: LawsOpt = None,
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="Override a setting by dotted path; repeatable.")] = None,
     out: OutOpt = None,
 ) -> None:
-    """Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a constant-speed friction sweep
-    (--data SWEEP.csv) by variable projection, with standard errors.
+    """Fit a friction law to a constant-speed sweep (--data SWEEP): Coulomb or Stribeck,
+    symmetric or per direction, the lowest BIC chosen, 95 % intervals, and a verdict on the
+    law's shape against the sweep's own scatter.
 
-    Writes identification.json, friction_fit.png, summary.md and manifest.json."""
+    Writes identification.json, friction_fit.png, fit.csv, summary.md and manifest.json."""
     from ema_cli.cli.identify_logs import run_log_mode
 
     run_log_mode(["--friction-sweep"], config=config, data=data, noise=None, seed=None,
                  pop=None, generations=None, set_=set_, out=out, free=None, make_data=None,
-                 torque_only=[])
+                 torque_only=[], columns=columns, laws=laws)
 
 
 @identify_errors

@@ -100,7 +100,7 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                  free: list[str] | None, make_data: str | None,
                  method: str | None = None, starts: int | None = None,
                  torque_only: list[str], columns: list[str] | None = None,
-                 window: str | None = None) -> None:
+                 window: str | None = None, laws: str | None = None) -> None:
     """Check the options of a log mode (one mode; no torque-data options) and run it."""
     from ema_cli.report.rundir import check_output
 
@@ -114,9 +114,11 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                        f" to the torque-data identification, not to {mode}")
     if free and mode != "--closed-loop":
         raise EmaError(f"--free applies to --closed-loop, not to {mode}")
-    if columns and mode != "--closed-loop":
-        raise EmaError(f"--columns applies to --closed-loop and the torque-data "
-                       f"identification, not to {mode}")
+    if columns and mode not in ("--closed-loop", "--friction-sweep"):
+        raise EmaError(f"--columns applies to --closed-loop, --friction-sweep and the "
+                       f"torque-data identification, not to {mode}")
+    if laws is not None and mode != "--friction-sweep":
+        raise EmaError(f"--laws applies to --friction-sweep, not to {mode}")
     if window is not None and mode != "--closed-loop":
         raise EmaError(f"--window applies to --closed-loop, not to {mode}")
     if mode != "--make-data" and noise is not None:
@@ -174,6 +176,10 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
         pairs = closed_loop_pairs(config, pairs, free)
         _closed_loop(config, pairs, out)
     else:
+        pairs += [(f"columns.{ch}", spec) for ch, spec in parse_assignments(columns,
+                                                                              "--columns")]
+        if laws is not None:
+            pairs.append(("laws", [w.strip() for w in laws.split(",") if w.strip()]))
         _friction_sweep(config, pairs, out)
 
 

@@ -38,9 +38,8 @@ def screw(tmp_path_factory):
 
 
 def test_linear_friction_map_per_direction(screw, tmp_path):
-    r, text = invoke("identify", "--friction-sweep", "--data", screw, "--set",
-                     "columns.omega_rpm=v:mm/s", "--set", "columns.torque_nm=F:N",
-                     "--out", tmp_path / "fs")
+    r, text = invoke("identify", "friction-sweep", "--data", screw, "--columns",
+                     "omega_rpm=v:mm/s", "--columns", "torque_nm=F:N", "--out", tmp_path / "fs")
     assert r.exit_code == 0, text
     assert "law: stribeck-dir: lowest BIC" in text and "shape: the model fits" in text
     js = json.loads((tmp_path / "fs" / "identification.json").read_text())
@@ -73,7 +72,7 @@ def test_torque_twist_terms_from_a_mat_struct(loops, tmp_path):
                      "--columns", "dtheta_rad=rec.m[:, 1]:arcmin", "--columns",
                      "torque_nm=rec.m(:, 3)", "--method", "exact", "--model", "paper",
                      "--alpha-range", "0", "0.004", "--k-range", "100", "2000",
-                     "--set", "terms=[offset,friction,preload]", "--out", tmp_path / "tq")
+                     "--terms", "offset,friction,preload", "--out", tmp_path / "tq")
     assert r.exit_code == 0, text
     assert "Eq. 8 shape: THE MODEL DOES NOT FIT" in text and "with terms shape: the model fits" \
         in text and "derived" in text
@@ -85,8 +84,20 @@ def test_torque_twist_terms_from_a_mat_struct(loops, tmp_path):
     assert (tmp_path / "tq" / "terms_fit.png").is_file()
 
 
+def test_only_the_chosen_laws_compete(screw, tmp_path):
+    r, text = invoke("identify", "--friction-sweep", "--data", screw, "--set",
+                     "columns.omega_rpm=v:mm/s", "--set", "columns.torque_nm=F:N",
+                     "--laws", "coulomb,stribeck", "--out", tmp_path / "fs2")
+    assert r.exit_code == 0, text
+    js = json.loads((tmp_path / "fs2" / "identification.json").read_text())
+    assert set(js["laws"]) == {"coulomb", "stribeck"}
+    # the symmetric law on a map 30 % apart by direction: its shape is wrong, and it says so
+    assert js["adequacy"]["verdict"] == "does not fit", js["adequacy"]["why"]
+
+
 @pytest.mark.parametrize("args, expect", [
-    (["--set", "terms=[friction,dahl]"], "terms friction and dahl are two laws of one friction"),
+    (["--terms", "friction,dahl"], "terms friction and dahl are two laws of one friction"),
+    (["--laws", "coulomb"], "--laws applies to --friction-sweep, not to the torque-data"),
     (["--set", "terms=[offset,backlash]"], "terms.1"),
     (["--columns", "torque_nm=T:furlong"], "unknown unit 'furlong'; torque_nm takes torque units"),
 ])
