@@ -155,3 +155,20 @@ def test_bad_sweep_columns_one_line(tmp_path, columns, expect):
     with pytest.raises(EmaError) as exc:
         load_sweep(p, columns)
     assert expect in exc.value.message and "\n" not in exc.value.message
+
+
+def test_stribeck_shape_delta_freed_is_recovered():
+    # a Gaussian Stribeck curve (delta = 2): fit_delta frees the shape; truth inside the
+    # intervals and delta's within 5 %
+    rng = np.random.default_rng(0)
+    w = np.concatenate([SPEEDS, SPEEDS, -SPEEDS, -SPEEDS])
+    u = np.abs(w)
+    T = np.sign(w) * (0.02 + 0.01 * np.exp(-(u / 1.0) ** 2) + 1e-4 * u) \
+        + NOISE * rng.standard_normal(w.size)
+    fit = fit_friction_sweep(SweepData(w, T, "delta 2"), fit_delta=True)
+    assert fit.chosen == "stribeck" and "delta" in fit.law.names
+    u_ = fit.law.uncertainty
+    truth = np.array([{"Fc": 0.02, "Fs": 0.03, "vs": 1.0, "sigma2": 1e-4, "delta": 2.0}[n]
+                      for n in fit.law.names])
+    assert np.sum((u_.ci_low <= truth) & (truth <= u_.ci_high)) >= 4
+    assert abs(fit.law.params["delta"] / 2 - 1) < 0.05
