@@ -16,6 +16,7 @@ from ema_cli.cli import (
     design,
     freqresp,
     identify,
+    identify_plant,
     locations,
     margins,
     production,
@@ -79,13 +80,16 @@ IDENTIFY_COMMANDS = (
     ("closed-loop", identify.closed_loop_cmd),
     ("friction-sweep", identify.friction_sweep_cmd),
     ("make-data", identify.make_data_cmd),
+    ("plant", identify_plant.plant),
+    ("validate", identify_plant.validate_cmd),
 )
 """The subcommands of `ema identify`, in the order its help lists them: one line each."""
 
 GROUPS = {
     "identify": (IDENTIFY_COMMANDS,
                  "Identify the actuator's parameters: from torque data (torque), a closed-loop "
-                 "log (closed-loop), a friction sweep (friction-sweep); make-data writes "
+                 "log (closed-loop), a friction sweep (friction-sweep), a rigid axis's measured "
+                 "record (plant; validate checks it on another record); make-data writes "
                  "synthetic data to try them on. `ema identify [CONFIG] [OPTIONS]` without a "
                  "command runs the torque identification, or a log mode with --closed-loop, "
                  "--friction-sweep or --make-data KIND (the spelling of earlier versions). "
