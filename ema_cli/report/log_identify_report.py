@@ -7,11 +7,13 @@ folder through ``report.rundir`` (atomic writes; the caller prepares and finishe
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullLocator
 
 from ema_cli.identify.closed_loop.problem import CHANNELS, make_grid
 from ema_cli.report.figures import subplots
@@ -279,6 +281,17 @@ def write_closed_loop(fit: ClosedLoopFit, out: Path, **fields: Any) -> list[str]
     return files
 
 
+def _symlog_decades(ax: Any, thresh: float, top: float) -> None:
+    """A symmetric log speed axis with ticks at whole decades only, none inside the linear
+    band around 0 (whose own ticks would overlap)."""
+    ax.set_xscale("symlog", linthresh=thresh, linscale=0.3)
+    k0, k1 = math.ceil(math.log10(thresh * 1.5)), math.floor(math.log10(top))
+    dec = [10.0**k for k in range(k0, k1 + 1)]
+    if len(dec) >= 2:  # a span under two decades keeps matplotlib's own ticks
+        ax.set_xticks([-d for d in reversed(dec)] + dec)
+        ax.xaxis.set_minor_locator(NullLocator())
+
+
 def friction_figure(fit: FrictionFit) -> Figure:
     """Measured friction vs speed with the chosen law and the model's symmetric LuGre curve,
     and the chosen law's residuals against the data's scatter."""
@@ -300,7 +313,7 @@ def friction_figure(fit: FrictionFit) -> Figure:
         if fit.chosen != "stribeck":
             a0.plot(ws * scale, fit.model(ws), "C0--", lw=1.0,
                     label="symmetric LuGre static curve (the model's)" if sign > 0 else None)
-    a0.set_xscale("symlog", linthresh=thresh, linscale=0.3)
+    _symlog_decades(a0, thresh, float(np.max(np.abs(x))))
     a0.set_xlabel(f"speed [{xu}]")
     a0.set_ylabel(f"friction {'force' if lin else 'torque'} [{fu}]")
     a0.set_title(f"chosen: {fit.chosen} ({fit.selection.get('why', '')})", fontsize=8)
@@ -313,7 +326,7 @@ def friction_figure(fit: FrictionFit) -> Figure:
     if ad is not None and np.isfinite(ad.scatter):
         a1.axhspan(-ad.scatter, ad.scatter, color="0.85", zorder=0,
                    label=f"± the data's scatter ({ad.scatter_method})")
-    a1.set_xscale("symlog", linthresh=thresh, linscale=0.3)
+    _symlog_decades(a1, thresh, float(np.max(np.abs(x))))
     a1.set_xlabel(f"speed [{xu}]")
     a1.set_ylabel(f"residual [{fu}]")
     a1.set_title("Residuals of the chosen law" + ("" if ad is None else
