@@ -70,6 +70,7 @@ bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep,
 	$(BIN)/python experiments/bench_yield.py --out results/bench/yield-1000
 	$(BIN)/python experiments/bench_scale.py
 	$(BIN)/python experiments/bench_identify_logs.py
+	$(BIN)/python experiments/bench_idmodes.py
 	$(BIN)/python -m experiments.loggen.battery --out results/battery/logs --n 20 --seed 2026 --jobs 2
 	$(BIN)/python experiments/identify_battery.py --battery results/battery/logs --out results/battery/fits
 	$(BIN)/python -m experiments.identify_crb --battery results/battery/logs --out results/battery/crb

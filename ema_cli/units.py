@@ -51,13 +51,23 @@ SI_UNIT = {"time": "s", "angle": "rad", "frequency": "Hz", "rate": "rad/s",
 
 LOG_UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "time": {"s": (1.0, 1.0), "ms": (1.0, 1e3), "us": (1.0, 1e6)},
-    "angle": {"deg": (DEG, 1.0), "rad": (1.0, 1.0), "mrad": (1.0, 1e3)},
+    "angle": {"deg": (DEG, 1.0), "rad": (1.0, 1.0), "mrad": (1.0, 1e3),
+              "arcmin": (DEG, 60.0)},
     "speed": {"rpm": (RPM, 1.0), "rad/s": (1.0, 1.0), "deg/s": (DEG, 1.0)},
     "current": {"A": (1.0, 1.0), "mA": (1.0, 1e3)},
     "voltage": {"V": (1.0, 1.0), "mV": (1.0, 1e3)},
     "length": {"m": (1.0, 1.0), "mm": (1.0, 1e3), "um": (1.0, 1e6)},
     "force": {"N": (1.0, 1.0), "kN": (1e3, 1.0), "N*m": (1.0, 1.0)},
+    "torque": {"N*m": (1.0, 1.0), "Nm": (1.0, 1.0), "mN*m": (1.0, 1e3), "mNm": (1.0, 1e3),
+               "kN*m": (1e3, 1.0)},
+    # a friction sweep's axes: rotary (torque vs speed) or linear (force vs speed, screws)
+    "sweep speed": {"rpm": (RPM, 1.0), "rad/s": (1.0, 1.0), "deg/s": (DEG, 1.0),
+                    "m/s": (1.0, 1.0), "mm/s": (1.0, 1e3)},
+    "torque or force": {"N*m": (1.0, 1.0), "Nm": (1.0, 1.0), "mN*m": (1.0, 1e3),
+                        "mNm": (1.0, 1e3), "N": (1.0, 1.0), "kN": (1e3, 1.0)},
 }
+LINEAR_UNITS = frozenset({"m/s", "mm/s", "N", "kN"})
+"""Units of LOG_UNITS that say a friction sweep is linear (N, m/s) rather than rotary."""
 """Units of a log column (``ema identify --columns CHANNEL=COLUMN:UNIT``): kind -> unit ->
 (factor, divisor), SI = value * factor / divisor. The decimal prefixes divide by an exact
 integer, so 1500 ms is exactly 1.5 s (a product with 1e-3 would round twice)."""

@@ -267,8 +267,10 @@ def check_log_steps(cfg: Any, duration: float, source: str) -> None:
 
 def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = None,
                             **settings: Any) -> FrictionSweepIdentification:
-    """Fit the static LuGre curve to a friction sweep (``data=`` the CSV), as ``ema identify
-    --friction-sweep`` does; settings: ``identify.log_settings.FrictionSweepSettings``."""
+    """Fit the static LuGre curve and the candidate laws (symmetric or per direction,
+    Coulomb or Stribeck; the lowest BIC chosen) to a friction sweep (``data=`` the file), as
+    ``ema identify --friction-sweep`` does; settings:
+    ``identify.log_settings.FrictionSweepSettings``."""
     from ema_cli.config.loader import load_config
     from ema_cli.errors import EmaError
     from ema_cli.identify.friction.sweep import fit_friction_sweep, load_sweep
@@ -278,7 +280,8 @@ def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = 
     cfg = load_config(config, pairs, FrictionSweepSettings)
     if cfg.data is None:
         raise EmaError("--friction-sweep needs --data SWEEP.csv (columns omega_rpm, torque_nm)")
-    fit = fit_friction_sweep(load_sweep(cfg.data), cfg.delta, cfg.vs_range)
+    fit = fit_friction_sweep(load_sweep(cfg.data, cfg.columns), cfg.delta, cfg.vs_range,
+                             tuple(cfg.laws), cfg.fit_delta)
     return FrictionSweepIdentification(fit, cfg)
 
 

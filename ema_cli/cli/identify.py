@@ -71,8 +71,10 @@ def result_table(res: IdentificationResult) -> None:
 
 
 ColumnsOpt = Annotated[list[str] | None, typer.Option(
-    "--columns", help="Map a column, repeatable. Torque data: NAME=FILE_COLUMN, e.g. "
-                      "torque_nm=T_meas. --closed-loop: CHANNEL=COLUMN[:UNIT], e.g. "
+    "--columns", help="Map a column, repeatable. Torque data: NAME=COLUMN[:UNIT], e.g. "
+                      "torque_nm=T_meas:mN*m; --friction-sweep: omega_rpm=v:mm/s, "
+                      "torque_nm=F:N; .mat: a selector rec.data[:, 2]. --closed-loop: "
+                      "CHANNEL=COLUMN[:UNIT], e.g. "
                       "theta_load_deg=pos:rad, t_s=time:ms; units: time s|ms|us, angle "
                       "deg|rad|mrad, speed rpm|rad/s|deg/s, current A|mA, voltage V|mV "
                       "(default: the channel's own).")]
@@ -88,8 +90,9 @@ ClosedLoopOpt = Annotated[bool, typer.Option(
                           "shooting, default) or GA then least squares (--method ga)."
 )]
 FrictionSweepOpt = Annotated[bool, typer.Option(
-    "--friction-sweep", help="Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a "
-                             "constant-speed sweep (--data SWEEP.csv: omega_rpm, torque_nm)."
+    "--friction-sweep", help="Fit a friction law (Coulomb or Stribeck, symmetric or per "
+                             "direction; BIC) to a constant-speed sweep (--data SWEEP: "
+                             "omega_rpm, torque_nm, or mapped by --columns)."
 )]
 MakeDataOpt = Annotated[str | None, typer.Option(
     "--make-data", help="Write synthetic data with stated truths: closed-loop (a 4 s chirp "
@@ -148,8 +151,16 @@ RunsOpt = Annotated[int | None, typer.Option(
 JobsOpt = Annotated[int | None, typer.Option(
     "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1).")]
 TorqueDataOpt = Annotated[Path | None, typer.Option(
-    "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
-                   "(default: synthetic data from the simulator).")]
+    "--data", help="CSV, Parquet or .mat with t_s, dtheta_rad, torque_nm [, domega_rad_s: "
+                   "derived when absent], or mapped by --columns (default: synthetic data "
+                   "from the simulator).")]
+TermsOpt = Annotated[str | None, typer.Option(
+    "--terms", metavar="T1,T2", help="Terms added to Eq. 8 in a second fit: offset (twist "
+    "offset), friction (+-Ft by the twist rate's sign) or dahl (the Dahl path), preload; "
+    "each at zero within its interval when not needed (docs/identification.md).")]
+LawsOpt = Annotated[str | None, typer.Option(
+    "--laws", metavar="L1,L2", help="--friction-sweep: candidate laws among coulomb, "
+    "coulomb-dir, stribeck, stribeck-dir (default all; the lowest BIC is chosen).")]
 NoiseOpt = Annotated[float | None, typer.Option(
     "--noise", help="Synthetic data: Gaussian noise, % of the torque RMS (seeded).")]
 DampingOpt = Annotated[str | None, typer.Option(
@@ -213,6 +224,8 @@ def identify_cmd(
     free: FreeOpt = None,
     backend: StartsBackendOpt = None,
     scheduler: SchedulerOpt = None,
+    terms: TermsOpt = None,
+    laws: LawsOpt = None,
 ) -> None:
     """The torque-data identification (as `ema identify torque`), or with --closed-loop,
     --friction-sweep or --make-data KIND the log modes (as `ema identify closed-loop`,
@@ -227,24 +240,29 @@ def identify_cmd(
                        "--method": method if not closed_loop else None, "--runs": runs,
                        "--n-jobs": n_jobs if not closed_loop else None,
                        "--damping": damping, "--model": model, "--c": c,
-                       "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits}
+                       "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits,
+                       "--terms": terms}
         run_log_mode(modes, config=config, data=data, noise=noise, seed=seed, pop=pop,
                      generations=generations, set_=set_, out=out, free=free,
                      make_data=make_data, columns=columns, window=window,
                      method=method if closed_loop else None, starts=starts,
                      torque_only=[k for k, v in torque_only.items() if v is not None],
-                     execution=(backend, n_jobs if closed_loop else None, scheduler))
+                     execution=(backend, n_jobs if closed_loop else None, scheduler),
+                     laws=laws)
         return
     if backend is not None or scheduler is not None:
-        raise EmaError("--backend and --scheduler apply to --closed-loop; the torque-data "
-                       "identification runs its GA runs in processes (--n-jobs)")
+        raise EmaError("--backend and --scheduler apply to --closed-loop; the torque GA: --n-jobs")
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
+                       "identification")
+    if laws is not None:
+        raise EmaError("--laws applies to --friction-sweep, not to the torque-data "
                        "identification")
     run_torque(config, k_range=k_range, alpha_range=alpha_range, c_range=c_range,
                method=method, runs=runs, n_jobs=n_jobs, data=data, columns=columns,
                noise=noise, damping=damping, model=model, c=c, fit_c=fit_c, seed=seed,
-               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out)
+               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out,
+               terms=terms)
 
 
 @identify_errors
@@ -260,8 +278,10 @@ def torque_cmd(
     n_jobs: JobsOpt = None,
     data: TorqueDataOpt = None,
     columns: Annotated[list[str] | None, typer.Option(
-        "--columns", help="Map a column of --data, repeatable: NAME=FILE_COLUMN, e.g. "
-                          "torque_nm=T_meas.")] = None,
+        "--columns", help="Map a column of --data, repeatable: NAME=COLUMN[:UNIT], e.g. "
+                          "torque_nm=T_meas:mN*m, dtheta_rad=rec.data[:, 1]:arcmin (units: "
+                          "time s|ms|us, twist rad|mrad|deg|arcmin, rate rad/s|deg/s|rpm, "
+                          "torque N*m|Nm|mN*m|mNm|kN*m).")] = None,
     noise: NoiseOpt = None,
     damping: DampingOpt = None,
     model: ModelOpt = None,
@@ -275,6 +295,7 @@ def torque_cmd(
     bits: BitsOpt = None,
     set_: SetOpt = None,
     out: OutOpt = None,
+    terms: TermsOpt = None,
 ) -> None:
     """Gear stiffness kL and half backlash alpha (and damping c) from transmission torque data
     (paper §3.1, Eq. 8) with a GA, beside the exact least-squares optimum; synthetic data or
@@ -285,7 +306,8 @@ def torque_cmd(
     run_torque(config, k_range=k_range, alpha_range=alpha_range, c_range=c_range,
                method=method, runs=runs, n_jobs=n_jobs, data=data, columns=columns,
                noise=noise, damping=damping, model=model, c=c, fit_c=fit_c, seed=seed,
-               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out)
+               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out,
+               terms=terms)
 
 
 def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range | None,
@@ -294,7 +316,8 @@ def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range
                noise: float | None, damping: str | None, model: str | None, c: float | None,
                fit_c: bool | None, seed: int | None, pop: int | None,
                generations: int | None, pc: float | None, pm: float | None,
-               bits: int | None, set_: list[str] | None, out: Path | None) -> None:
+               bits: int | None, set_: list[str] | None, out: Path | None,
+               terms: str | None = None) -> None:
     """Check the options of the torque-data identification, run it, write its folder and
     print its table (both spellings: `ema identify torque` and `ema identify [CONFIG]`)."""
     from ema_cli.api.identification import identification_inputs, identify, load_settings
@@ -309,7 +332,9 @@ def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range
         "runs": runs, "n_jobs": n_jobs, "data": str(data) if data is not None else None,
         "synthetic.noise_pct": noise, "synthetic.damping": damping, "model": model, "c": c,
         "fit_c": fit_c, "seed": seed, "ga.pop": pop, "ga.generations": generations,
-        "ga.pc": pc, "ga.pm": pm, "ga.bits": bits}, set_, columns)
+        "ga.pc": pc, "ga.pm": pm, "ga.bits": bits,
+        "terms": None if terms is None else [t.strip() for t in terms.split(",") if t.strip()]},
+        set_, columns)
     settings = load_settings(config, pairs)
     if settings.data is not None and (noise is not None or damping is not None):
         raise EmaError("--noise and --damping describe synthetic data; they cannot be used "
@@ -386,21 +411,29 @@ def friction_sweep_cmd(
     config: Annotated[Path | None, typer.Argument(
         help="YAML settings of the friction fit; options below override it.")] = None,
     data: Annotated[Path | None, typer.Option(
-        "--data", help="The sweep: CSV with omega_rpm, torque_nm (steady friction torque at "
-                       "constant motor speeds).")] = None,
+        "--data", help="The sweep: CSV, Parquet or .mat with omega_rpm, torque_nm (steady "
+                       "friction at constant speeds, any order, repeats welcome), or mapped "
+                       "by --columns.")] = None,
+    columns: Annotated[list[str] | None, typer.Option(
+        "--columns", help="Map a column, repeatable: omega_rpm|torque_nm=COLUMN[:UNIT], e.g. "
+                          "omega_rpm=v:mm/s, torque_nm=F:N (speed rpm|rad/s|deg/s|m/s|mm/s, "
+                          "friction N*m|Nm|mN*m|mNm|N|kN; m/s, mm/s, N, kN: a linear "
+                          "sweep).")] = None,
+    laws: LawsOpt = None,
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="Override a setting by dotted path; repeatable.")] = None,
     out: OutOpt = None,
 ) -> None:
-    """Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a constant-speed friction sweep
-    (--data SWEEP.csv) by variable projection, with standard errors.
+    """Fit a friction law to a constant-speed sweep (--data SWEEP): Coulomb or Stribeck,
+    symmetric or per direction, the lowest BIC chosen, 95 % intervals, and a verdict on the
+    law's shape against the sweep's own scatter.
 
-    Writes identification.json, friction_fit.png, summary.md and manifest.json."""
+    Writes identification.json, friction_fit.png, fit.csv, summary.md and manifest.json."""
     from ema_cli.cli.identify_logs import run_log_mode
 
     run_log_mode(["--friction-sweep"], config=config, data=data, noise=None, seed=None,
                  pop=None, generations=None, set_=set_, out=out, free=None, make_data=None,
-                 torque_only=[])
+                 torque_only=[], columns=columns, laws=laws)
 
 
 @identify_errors
@@ -450,6 +483,18 @@ def print_identification(ident: Identification, folder: Path) -> None:
         + ("c fitted" if res.problem.fit_c else f"c fixed at {res.problem.c_fixed:.6g} N·m·s/rad"))
     evals = res.runs[0].evaluations
     per_run = sum(r.wall_time_s for r in res.runs) / len(res.runs)
+    if res.adequacy is not None:
+        console.print(f"Eq. 8 {res.adequacy.line()}")
+    tf = res.terms_fit
+    if tf is not None:
+        console.print(f"with terms {', '.join(tf.model.terms)} ({tf.model.form} form; "
+                      f"intervals: block jackknife, {tf.uncertainty.dof} dof):")
+        for n, v in tf.intervals().items():
+            zero = "  (0 inside: not needed)" if v["zero_inside"] and n not in (
+                "kL", "alpha", "c", "lam_t") else ""
+            console.print(f"  {n:8s} {v['value']:+.6g} {v['unit']}  95 % [{v['ci95'][0]:+.4g},"
+                          f" {v['ci95'][1]:+.4g}]{zero}")
+        console.print(f"with terms {tf.adequacy.line()}")
     console.print(
         f"{len(res.runs)} run(s) × {evals:,} evaluations, {per_run:.3f} s per run; exact "
         f"solver {opt.wall_time_s * 1e3:.1f} ms; total {res.wall_time_s:.2f} s -> {folder}")

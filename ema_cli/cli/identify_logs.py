@@ -101,10 +101,11 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                  method: str | None = None, starts: int | None = None,
                  torque_only: list[str], columns: list[str] | None = None,
                  window: str | None = None,
-                 execution: tuple[str | None, int | None, str | None] = (None, None, None)
-                 ) -> None:
+                 execution: tuple[str | None, int | None, str | None] = (None, None, None),
+                 laws: str | None = None) -> None:
     """Check the options of a log mode (one mode; no torque-data options) and run it;
-    ``execution``: --backend, --n-jobs, --scheduler (--closed-loop only)."""
+    ``execution``: --backend, --n-jobs, --scheduler (--closed-loop only); ``laws`` the
+    friction-sweep's candidate laws."""
     from ema_cli.report.rundir import check_output
 
     if len(modes) > 1:
@@ -117,9 +118,11 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                        f" to the torque-data identification, not to {mode}")
     if free and mode != "--closed-loop":
         raise EmaError(f"--free applies to --closed-loop, not to {mode}")
-    if columns and mode != "--closed-loop":
-        raise EmaError(f"--columns applies to --closed-loop and the torque-data "
-                       f"identification, not to {mode}")
+    if columns and mode not in ("--closed-loop", "--friction-sweep"):
+        raise EmaError(f"--columns applies to --closed-loop, --friction-sweep and the "
+                       f"torque-data identification, not to {mode}")
+    if laws is not None and mode != "--friction-sweep":
+        raise EmaError(f"--laws applies to --friction-sweep, not to {mode}")
     if window is not None and mode != "--closed-loop":
         raise EmaError(f"--window applies to --closed-loop, not to {mode}")
     if mode != "--make-data" and noise is not None:
@@ -180,6 +183,10 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
         pairs = closed_loop_pairs(config, pairs, free)
         _closed_loop(config, pairs, out, execution)
     else:
+        pairs += [(f"columns.{ch}", spec) for ch, spec in parse_assignments(columns,
+                                                                              "--columns")]
+        if laws is not None:
+            pairs.append(("laws", [w.strip() for w in laws.split(",") if w.strip()]))
         _friction_sweep(config, pairs, out)
 
 
@@ -270,5 +277,13 @@ def _friction_sweep(config: Path | None, pairs: list[tuple[str, Any]],
            fit.data.truth)
     for w in fit.warnings:
         err_console.print(f"[yellow]warning:[/] {w}")
-    console.print(f"residual std {js['cost']['residual_std_nm']:.4g} N·m; sigma0 is not "
-                  f"identifiable at constant speed; {fit.wall_time_s:.2f} s -> {folder}")
+    sel = js["selection"]
+    console.print(f"law: {fit.chosen}: {sel['why']} ({sel['rule']})")
+    for k, v in js["differences_neg_minus_pos"].items():
+        console.print(f"  {k}: {v['value']:+.4g} [{v['ci95'][0]:+.4g}, {v['ci95'][1]:+.4g}]"
+                      + ("  (0 inside)" if v["zero_inside"] else ""))
+    if fit.adequacy is not None:
+        console.print(fit.adequacy.line())
+    console.print(f"speeds in {fit.data.speed_unit}, friction in {fit.data.force_unit}; "
+                  f"symmetric LuGre residual std {js['cost']['residual_std_nm']:.4g}; sigma0 "
+                  f"is not identifiable at constant speed; {fit.wall_time_s:.2f} s -> {folder}")

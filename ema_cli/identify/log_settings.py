@@ -197,10 +197,43 @@ class FrictionSweepSettings(Strict):
     """Everything one ``ema identify --friction-sweep`` run needs."""
 
     name: PlainName = Field("friction-sweep", description="study name (a folder name)")
-    data: str | None = Field(None, description="CSV with omega_rpm, torque_nm")
+    data: str | None = Field(None, description="the sweep: .csv/.txt, .parquet/.pq or .mat "
+                                               "with omega_rpm, torque_nm (or mapped by "
+                                               "columns); rows in any order, repeats welcome")
+    columns: dict[str, str] | None = Field(
+        None, description="column map: omega_rpm|torque_nm -> 'COLUMN[:UNIT]' (speed rpm|"
+                          "rad/s|deg/s|m/s|mm/s, friction N*m|Nm|mN*m|mNm|N|kN; m/s, mm/s, N "
+                          "or kN make it a linear sweep, SI N and m/s); COLUMN may be a .mat "
+                          "selector (rec.data[:, 2])")
+    laws: list[Literal["coulomb", "coulomb-dir", "stribeck", "stribeck-dir"]] = Field(
+        default_factory=lambda: ["coulomb", "coulomb-dir", "stribeck", "stribeck-dir"],
+        description="candidate laws (-dir: one parameter set per direction); the lowest BIC "
+                    "is chosen")
+    fit_delta: bool = Field(False, description="fit the Stribeck exponent delta too (per "
+                                               "direction in stribeck-dir)")
     delta: PositiveFloat = Field(1.0, le=10, description="Stribeck exponent, fixed [-]")
     vs_range: tuple[PositiveFloat, PositiveFloat] | None = Field(
         None, description="vs search range [rad/s] (null: min|w|/10 .. max|w|*10)")
+
+    @field_validator("columns")
+    @classmethod
+    def _sweep_columns(cls, v: dict[str, str] | None) -> dict[str, str] | None:
+        from ema_cli.identify.friction.sweep import SWEEP_CHANNELS
+        from ema_cli.identify.logs.channels import parse_column_spec
+
+        for key, spec in (v or {}).items():
+            try:
+                parse_column_spec(key, spec, SWEEP_CHANNELS)
+            except EmaError as exc:
+                raise ValueError(f"{KEY_MARK}{key}{KEY_MARK}{exc.message}") from None
+        return v
+
+    @field_validator("laws")
+    @classmethod
+    def _laws(cls, v: list[str]) -> list[str]:
+        if not v:
+            raise ValueError("name at least one candidate law")
+        return list(dict.fromkeys(v))
 
     @field_validator("vs_range")
     @classmethod

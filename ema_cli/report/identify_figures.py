@@ -206,23 +206,73 @@ def fit_figure(res: IdentificationResult) -> Figure:
     return fig
 
 
+def terms_figure(res: IdentificationResult) -> Figure:
+    """The fit with terms beside Eq. 8's: torque vs twist (measured, both models), and the
+    residual RMS per twist range and direction of the twist rate against the data's scatter
+    (the shape verdict's regions)."""
+    tf = res.terms_fit
+    assert tf is not None and res.adequacy is not None
+    data = res.data
+    step = max(1, data.n_samples // MAX_FIT_POINTS)
+    a_scale = PLOT_UNITS["alpha"][2]
+    fig, (a0, a1) = subplots(1, 2, figsize=(14, 5.0))
+    dth = data.dth[::step] * a_scale
+    a0.plot(dth, data.torque[::step], "o", color="0.7", ms=5, mew=0, label="measured")
+    a0.plot(dth, res.problem.model_torque(res.optimum.x)[::step], ".", color="C0", ms=1.2,
+            label="Eq. 8 (least-squares optimum)")
+    a0.plot(dth, tf.model.torque_model(tf.x)[::step], ".", color="C1", ms=1.2,
+            label=f"with terms: {', '.join(tf.model.terms)}")
+    a0.set_xlabel("transmission twist dθ [mrad]")
+    a0.set_ylabel("transmission torque T [N·m]")
+    a0.set_title("Torque-twist loops", fontsize=9)
+    a0.legend(fontsize=8, loc="upper left", markerscale=4)
+    base, ad = res.adequacy, tf.adequacy
+    labels = [r.label for r in ad.regions]
+    y = np.arange(len(labels))
+    a1.barh(y + 0.2, [r.ratio for r in base.regions], height=0.4, color="C0",
+            label=f"Eq. 8: {base.verdict}")
+    a1.barh(y - 0.2, [r.ratio for r in ad.regions], height=0.4, color="C1",
+            label=f"with terms: {ad.verdict}")
+    from ema_cli.identify.shape_adequacy import FIT_RATIO, MISFIT_RATIO
+
+    a1.axvline(FIT_RATIO, color="g", ls=":", lw=1.0, label=f"fits up to {FIT_RATIO:g}x")
+    a1.axvline(MISFIT_RATIO, color="r", ls=":", lw=1.0,
+               label=f"does not fit from {MISFIT_RATIO:g}x")
+    a1.set_yticks(y)
+    a1.set_yticklabels(labels, fontsize=6)
+    a1.set_xscale("log")
+    a1.set_xlabel("residual RMS / the torque's scatter [-]")
+    a1.set_title(f"Where the model fits (scatter {ad.scatter:.3g} N·m, {ad.scatter_method})",
+                 fontsize=8)
+    a1.legend(fontsize=7, loc="lower right")
+    for a in (a0, a1):
+        a.grid(True, alpha=0.3)
+    fig.suptitle(_title(res))
+    fig.tight_layout()
+    return fig
+
+
 def write_identification(
     res: IdentificationResult, out: Path, command: str = "identify", **fields: Any
 ) -> list[str]:
     """Write the identification folder: identification.json, runs.csv, history.csv,
-    convergence.png, fit.png and manifest.json (``fields`` are added to the manifest).
-    Returns the file names written."""
+    convergence.png, fit.png, terms_fit.png (with terms) and manifest.json (``fields`` are
+    added to the manifest). Returns the file names written."""
     out = Path(out)
+    files = list(OUTPUT_FILES)
     write_json(out / "identification.json", res.to_json())
     write_csv(out / "runs.csv", res.runs_frame(), float_format="%.12g")
     write_csv(out / "history.csv", res.history_frame(), float_format="%.12g")
     write_figure(out / "convergence.png", convergence_figure(res))
     write_figure(out / "fit.png", fit_figure(res))
+    if res.terms_fit is not None and res.adequacy is not None:
+        write_figure(out / "terms_fit.png", terms_figure(res))
+        files.insert(-1, "terms_fit.png")
     write_json(out / "manifest.json", manifest(
         command, seed=res.settings.seed, settings=res.settings.model_dump(mode="json"),
         seeds=f"np.random.SeedSequence({res.settings.seed}).spawn({res.settings.runs})",
-        wall_time_s=res.wall_time_s, outputs=list(OUTPUT_FILES), **fields))
-    return list(OUTPUT_FILES)
+        wall_time_s=res.wall_time_s, outputs=files, **fields))
+    return files
 
 
 def write_identification_summary(summary: IdentificationSummary, out: Path) -> None:

@@ -7,11 +7,13 @@ folder through ``report.rundir`` (atomic writes; the caller prepares and finishe
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullLocator
 
 from ema_cli.identify.closed_loop.problem import CHANNELS, make_grid
 from ema_cli.report.figures import subplots
@@ -279,31 +281,56 @@ def write_closed_loop(fit: ClosedLoopFit, out: Path, **fields: Any) -> list[str]
     return files
 
 
+def _symlog_decades(ax: Any, thresh: float, top: float) -> None:
+    """A symmetric log speed axis with ticks at whole decades only, none inside the linear
+    band around 0 (whose own ticks would overlap)."""
+    ax.set_xscale("symlog", linthresh=thresh, linscale=0.3)
+    k0, k1 = math.ceil(math.log10(thresh * 1.5)), math.floor(math.log10(top))
+    dec = [10.0**k for k in range(k0, k1 + 1)]
+    if len(dec) >= 2:  # a span under two decades keeps matplotlib's own ticks
+        ax.set_xticks([-d for d in reversed(dec)] + dec)
+        ax.xaxis.set_minor_locator(NullLocator())
+
+
 def friction_figure(fit: FrictionFit) -> Figure:
-    """Measured and fitted static friction curve vs motor speed, and the residuals."""
+    """Measured friction vs speed with the chosen law and the model's symmetric LuGre curve,
+    and the chosen law's residuals against the data's scatter."""
     d = fit.data
     fig, (a0, a1) = subplots(1, 2, figsize=(13, 5.0))
-    rpm = d.omega / RPM
-    a0.plot(rpm, d.torque, "o", color="0.5", ms=4, label="measured")
+    lin = d.linear
+    scale, xu = (1.0, "m/s") if lin else (1.0 / RPM, "rpm")
+    fu = "N" if lin else "N·m"
+    x = d.omega * scale
+    thresh = float(np.min(np.abs(x)))
+    a0.plot(x, d.torque, "o", color="0.5", ms=4, label="measured")
     lim = float(np.max(np.abs(d.omega)))
-    w = np.geomspace(lim * 1e-4, lim, 400)
-    for sign, label in ((1.0, "fitted static LuGre curve"), (-1.0, None)):
-        a0.plot(sign * w / RPM, fit.model(sign * w), "C0", lw=1.2, label=label)
-    a0.set_xscale("symlog", linthresh=float(np.min(np.abs(rpm))))
-    a0.set_xlabel("motor speed [rpm]")
-    a0.set_ylabel("friction torque [N·m]")
-    p = fit.params
-    a0.set_title(f"Fc {p['Fc']:.4g} N·m, Fs {p['Fs']:.4g} N·m, vs {p['vs']:.4g} rad/s, "
-                 f"σ2 {p['sigma2']:.3g} N·m·s/rad", fontsize=9)
+    w = np.geomspace(float(np.min(np.abs(d.omega))) * 0.5, lim, 400)
+    law = fit.law
+    for sign in (1.0, -1.0):
+        ws = sign * w
+        a0.plot(ws * scale, law.curve(ws), "C1", lw=1.6,
+                label=f"chosen law: {fit.chosen}" if sign > 0 else None)
+        if fit.chosen != "stribeck":
+            a0.plot(ws * scale, fit.model(ws), "C0--", lw=1.0,
+                    label="symmetric LuGre static curve (the model's)" if sign > 0 else None)
+    _symlog_decades(a0, thresh, float(np.max(np.abs(x))))
+    a0.set_xlabel(f"speed [{xu}]")
+    a0.set_ylabel(f"friction {'force' if lin else 'torque'} [{fu}]")
+    a0.set_title(f"chosen: {fit.chosen} ({fit.selection.get('why', '')})", fontsize=8)
     a0.legend(fontsize=8, loc="upper left")
-    r = d.torque - fit.model()
-    a1.plot(rpm, r, "o", color="C2", ms=4,
-            label=f"measured − model (RMS {np.sqrt(np.mean(r**2)):.3g} N·m)")
+    r = d.torque - law.curve(d.omega)
+    a1.plot(x, r, "o", color="C2", ms=4,
+            label=f"measured − {fit.chosen} (RMS {np.sqrt(np.mean(r**2)):.3g} {fu})")
     a1.axhline(0.0, color="0.4", lw=0.6)
-    a1.set_xscale("symlog", linthresh=float(np.min(np.abs(rpm))))
-    a1.set_xlabel("motor speed [rpm]")
-    a1.set_ylabel("residual torque [N·m]")
-    a1.set_title("Residuals")
+    ad = fit.adequacy
+    if ad is not None and np.isfinite(ad.scatter):
+        a1.axhspan(-ad.scatter, ad.scatter, color="0.85", zorder=0,
+                   label=f"± the data's scatter ({ad.scatter_method})")
+    _symlog_decades(a1, thresh, float(np.max(np.abs(x))))
+    a1.set_xlabel(f"speed [{xu}]")
+    a1.set_ylabel(f"residual [{fu}]")
+    a1.set_title("Residuals of the chosen law" + ("" if ad is None else
+                                                  f": shape verdict '{ad.verdict}'"))
     a1.legend(fontsize=8, loc="upper left")
     for a in (a0, a1):
         a.grid(True, alpha=0.3)
@@ -312,21 +339,46 @@ def friction_figure(fit: FrictionFit) -> Figure:
     return fig
 
 
+def _param_rows(params: dict[str, Any]) -> list[str]:
+    rows = ["| parameter | value | unit | SE | 95 % interval | determined |",
+            "|---|---|---|---|---|---|"]
+    for n, v in params.items():
+        det = "yes" if v["determined"] else "**NOT DETERMINED**: " + "; ".join(
+            v["not_determined_because"])
+        rows.append(f"| {n} | {md_cell(v['value'], 6)} | {v['unit']} | "
+                    f"{md_cell(v['standard_error'], 6)}"
+                    f" | [{md_cell(v['ci95'][0], 6)}, {md_cell(v['ci95'][1], 6)}] | {det} |")
+    return rows
+
+
 def friction_summary(fit: FrictionFit) -> str:
     """summary.md of a friction-sweep identification."""
     js = fit.to_json()
+    sel = js["selection"]
     lines = [f"# ema identify --friction-sweep: {fit.data.source}", "",
-             f"{fit.data.n} speeds; residual std {js['cost']['residual_std_nm']:.4g} N·m; "
-             f"delta = {fit.delta:g} (fixed).", "",
-             "| parameter | value | unit | SE | 95 % interval | determined |",
-             "|---|---|---|---|---|---|"]
-    for n, v in js["parameters"].items():
-        det = "yes" if v["determined"] else "**NOT DETERMINED**: " + "; ".join(
-            v["not_determined_because"])
-        lines.append(f"| {n} | {md_cell(v['value'], 6)} | {v['unit']} | "
-                     f"{md_cell(v['standard_error'], 6)}"
-                     f" | [{md_cell(v['ci95'][0], 6)}, {md_cell(v['ci95'][1], 6)}] | {det} |")
-    lines += ["", f"sigma0: {js['sigma0']}.", ""]
+             f"{fit.data.n} speeds; speeds in {fit.data.speed_unit}, friction in "
+             f"{fit.data.force_unit}.", "",
+             f"## Chosen law: {fit.chosen}", "", f"Rule: {sel['rule']}.", "",
+             f"Why: {sel['why']}.", "", *_param_rows(js["parameters"]), ""]
+    diffs = js["differences_neg_minus_pos"]
+    if diffs:
+        lines += ["Per-direction differences (- minus +), 95 % intervals:", ""]
+        lines += [f"- {k}: {md_cell(v['value'], 5)} [{md_cell(v['ci95'][0], 5)}, "
+                  f"{md_cell(v['ci95'][1], 5)}]" + (" (0 inside)" if v["zero_inside"] else "")
+                  for k, v in diffs.items()]
+        lines.append("")
+    lines += ["| law | k | RSS | BIC |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['k']} | {md_cell(v['rss'], 5)} | {md_cell(v['bic'], 6)} |"
+              for k, v in js["laws"].items()]
+    lines += ["", "F-tests (nested laws):", ""]
+    lines += [f"- {k}: F = {md_cell(v['F'], 4)}, dof {v['dof']}, p = {md_cell(v['p'], 3)}"
+              for k, v in sel["f_tests"].items()]
+    if fit.adequacy is not None:
+        lines += ["", "## Shape", "", fit.adequacy.line(), ""]
+    lines += ["", "## The model's own law (symmetric LuGre static curve)", "",
+              f"delta = {fit.delta:g} (fixed); residual std "
+              f"{js['cost']['residual_std_nm']:.4g}.", "",
+              *_param_rows(js["symmetric_stribeck"]), "", f"sigma0: {js['sigma0']}.", ""]
     if fit.warnings:
         lines += ["Warnings:", *[f"- {w}" for w in fit.warnings], ""]
     return "\n".join(lines)
@@ -334,9 +386,14 @@ def friction_summary(fit: FrictionFit) -> str:
 
 def friction_fit_columns(fit: FrictionFit) -> dict[str, np.ndarray]:
     """fit.csv of a friction-sweep identification: ``omega_rpm``, ``torque_nm`` (measured),
-    ``torque_model_nm`` (the fitted static curve)."""
+    ``torque_model_nm`` (the model's symmetric static curve), ``torque_chosen_law_nm`` (the
+    chosen law); a linear sweep: ``v_m_s``, ``force_n``, ``force_model_n``,
+    ``force_chosen_law_n``."""
+    if fit.data.linear:
+        return {"v_m_s": fit.data.omega, "force_n": fit.data.torque,
+                "force_model_n": fit.model(), "force_chosen_law_n": fit.law.curve(fit.data.omega)}
     return {"omega_rpm": fit.data.omega / RPM, "torque_nm": fit.data.torque,
-            "torque_model_nm": fit.model()}
+            "torque_model_nm": fit.model(), "torque_chosen_law_nm": fit.law.curve(fit.data.omega)}
 
 
 def synthetic_figure(log: SyntheticLog) -> Figure:

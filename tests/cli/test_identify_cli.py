@@ -103,7 +103,7 @@ def _set_value(col, row, value):
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda df: df.drop(columns=["domega_rad_s"]), "lacks column(s) domega_rad_s"),
+    (lambda df: df.drop(columns=["torque_nm"]), "lacks column(s) torque_nm"),
     (_set_value("torque_nm", 7, np.nan), "'torque_nm' has 1 empty, non-numeric, NaN or inf"),
     (_set_value("dtheta_rad", 3, np.inf), "'dtheta_rad' has 1 empty, non-numeric, NaN or inf"),
     (lambda df: df.head(5), "has 5 data rows; at least 20 are needed"),
@@ -125,7 +125,7 @@ def test_missing_and_unreadable_files(tmp_path):
     empty = tmp_path / "empty.csv"
     empty.write_text("")
     r, text = invoke("--data", empty)
-    assert r.exit_code == 2 and "is not a readable CSV" in text
+    assert r.exit_code == 2 and "is empty" in text
     assert "Traceback" not in r.output
 
 

@@ -131,9 +131,8 @@ def test_bad_map_or_window_one_line_nothing_written(logs, tmp_path, change, args
 
 
 @pytest.mark.parametrize("args, expect", [
-    (["--friction-sweep", "--data", "x.csv", "--columns", "t_s=a"],
-     "--columns applies to --closed-loop and the torque-data identification, not to "
-     "--friction-sweep"),
+    (["--friction-sweep", "--data", "x.csv", "--columns", "t_s=a"],  # its own channels only
+     "columns.t_s: unknown channel 't_s'; expected one of omega_rpm, torque_nm"),
     (["--friction-sweep", "--data", "x.csv", "--window", "0,1"],
      "--window applies to --closed-loop, not to --friction-sweep"),
     (["--data", "x.csv", "--window", "0,1"],

@@ -105,8 +105,8 @@ def test_undetermined_parameters_are_flagged():
      "line 12)"),
     ("omega_rpm,torque_nm\n" + "".join(f"{v},0.02\n" for v in range(1, 11)),
      "0 negative speeds; the sweep needs both directions"),
-    ("omega_rpm,torque_nm\n" + "".join(f"{s}{v},0.02\n" for s in "-+" for v in range(1, 6))
-     + "0,0\n", "'omega_rpm' is 0 at line 12"),
+    ("omega_rpm,torque_nm\n" + "".join(f"{s}{v},0.02\n" for s in "-+" for v in range(1, 4))
+     + "0,0\n0,0.01\n", "has 6 speed(s) other than 0"),
     ("omega_rpm,torque_nm\n1,0.02\n-1,-0.02\n", "has 2 speed(s)"),
 ])
 def test_bad_sweep_files(tmp_path, text, expect):

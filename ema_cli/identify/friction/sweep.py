@@ -31,9 +31,18 @@ import numpy as np
 from ema_cli._numba import njit
 from ema_cli.errors import EmaError
 from ema_cli.files import read_csv
+from ema_cli.identify.friction.laws import LAWS, LawFit, fit_law, min_points, select_law
+from ema_cli.identify.shape_adequacy import (
+    MAD_NORMAL,
+    MIN_SCATTER_DOF,
+    Adequacy,
+    assess_shape,
+    pure_error,
+    quantile_bins,
+    repeat_groups,
+)
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
 from ema_cli.model.lugre import steady_friction_nb, stribeck_nb
-from ema_cli.units import RPM
 
 SWEEP_COLUMNS = ("omega_rpm", "torque_nm")
 """Columns of a friction-sweep CSV: motor speed [rpm], steady friction torque [N*m]."""
@@ -44,6 +53,7 @@ MIN_PER_DIRECTION = 3  # fewest speeds per direction [rows]
 VS_GRID = 241  # log-spaced vs values scanned before the scalar search [points]
 VS_SPAN = 10.0  # vs is searched from min|w|/VS_SPAN to max|w|*VS_SPAN [-]
 POLISH_TOL = 1e-15  # xtol/ftol/gtol of the four-parameter polish [-]
+SHAPE_BINS = 4  # speed ranges per direction in the shape verdict's "where" [bins]
 
 
 @njit(cache=True, error_model="numpy")
@@ -104,16 +114,30 @@ def jacobian(w: np.ndarray, x: np.ndarray, delta: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SweepData:
-    """A friction sweep: motor speeds ``omega`` [rad/s] and steady friction torques [N*m]."""
+    """A friction sweep: speeds ``omega`` [rad/s, or m/s for a linear sweep] and steady
+    friction torques [N*m, or forces N]; ``notes`` say what loading changed (rows dropped,
+    signs restored)."""
 
     omega: np.ndarray
     torque: np.ndarray
     source: str
     truth: dict[str, float] | None = None
+    linear: bool = False
+    notes: tuple[str, ...] = ()
 
     @property
     def n(self) -> int:
         return int(self.omega.shape[0])
+
+    @property
+    def speed_unit(self) -> str:
+        """The SI unit of the speeds: rad/s or m/s."""
+        return "m/s" if self.linear else "rad/s"
+
+    @property
+    def force_unit(self) -> str:
+        """The SI unit of the friction: N*m or N."""
+        return "N" if self.linear else "N*m"
 
 
 def read_truth(path: Path) -> dict[str, float] | None:
@@ -160,30 +184,52 @@ def read_table(path: str | Path, required: tuple[str, ...],
     return out, present
 
 
-def load_sweep(path: str | Path) -> SweepData:
-    """Read and validate a friction-sweep CSV (``omega_rpm``, ``torque_nm``; one row per
-    constant speed, both directions). Errors name the file, column and line."""
+SWEEP_CHANNELS: dict[str, tuple[str, str]] = {"omega_rpm": ("sweep speed", "rpm"),
+                                               "torque_nm": ("torque or force", "N*m")}
+"""The channels of a friction sweep -> (kind of unit, own unit) for ``--columns``."""
+
+
+def load_sweep(path: str | Path, columns: dict[str, str] | None = None) -> SweepData:
+    """Read and validate a friction sweep (``omega_rpm``, ``torque_nm``, or mapped with
+    ``columns``: channel -> ``COLUMN[:UNIT]``, units rpm, rad/s, deg/s, m/s, mm/s and N*m,
+    mN*m, N, kN; CSV, Parquet or .mat). Rows need not be sorted and may repeat; rows at
+    exactly zero speed are dropped (at rest the friction is not on the static curve), and a
+    map giving the friction's magnitude in both directions gets the sign of the speed back
+    (both noted). Errors name the file, column and line."""
+    from ema_cli.identify.logs.channels import read_log
+    from ema_cli.units import LINEAR_UNITS
+
     p = Path(path)
-    cols, _ = read_table(p, SWEEP_COLUMNS)
-    w = cols["omega_rpm"] * RPM
-    T = cols["torque_nm"]
-    n = w.shape[0]
-    if n < MIN_SWEEP_ROWS:
-        raise EmaError(f"data file '{p}' has {n} speed(s); a friction sweep needs at least "
-                       f"{MIN_SWEEP_ROWS} (4 parameters, both directions)")
+    cols = read_log(p, tuple(SWEEP_CHANNELS), (), columns, SWEEP_CHANNELS)
+    w = cols.values["omega_rpm"]
+    T = cols.values["torque_nm"]
+    linear = bool(LINEAR_UNITS & set(cols.units.values()))
+    label = cols.label("omega_rpm")
+    notes = []
     zero = np.flatnonzero(w == 0.0)
     if zero.size:
-        raise EmaError(f"data file '{p}': column 'omega_rpm' is 0 at line {int(zero[0]) + 2}; "
-                       "at standstill the friction is not on the static curve (remove the row)")
+        keep = w != 0.0
+        notes.append(f"{zero.size} row(s) at zero speed dropped ({label} is 0 at "
+                     f"{cols.table.where(int(zero[0]))}): at rest the friction is not on the "
+                     "static curve")
+        w, T = w[keep], T[keep]
+    n = w.shape[0]
+    if n < MIN_SWEEP_ROWS:
+        raise EmaError(f"data file '{p}' has {n} speed(s) other than 0; a friction sweep needs "
+                       f"at least {MIN_SWEEP_ROWS} (4 parameters, both directions)")
     n_pos, n_neg = int(np.sum(w > 0)), int(np.sum(w < 0))
     if min(n_pos, n_neg) < MIN_PER_DIRECTION:
-        raise EmaError(f"data file '{p}': column 'omega_rpm' has {n_pos} positive and {n_neg} "
+        raise EmaError(f"data file '{p}': {label} has {n_pos} positive and {n_neg} "
                        f"negative speeds; the sweep needs both directions, at least "
                        f"{MIN_PER_DIRECTION} speeds each")
     if np.unique(np.abs(w)).shape[0] < 4:
-        raise EmaError(f"data file '{p}': column 'omega_rpm' has fewer than 4 distinct |speeds|;"
+        raise EmaError(f"data file '{p}': {label} has fewer than 4 distinct |speeds|;"
                        " Fc, Fs, vs and sigma2 need at least 4")
-    return SweepData(w, T, f"file: {p}", read_truth(p))
+    if np.median(T[w < 0]) > 0 and np.median(T[w > 0]) > 0:
+        T = np.where(w < 0, -np.abs(T), T)
+        notes.append("the friction is positive at negative speeds too (a map of magnitudes): "
+                     "the - direction's values were given the sign of the speed")
+    return SweepData(w, T, f"file: {p}", read_truth(p), linear, tuple(notes))
 
 
 @dataclass
@@ -199,6 +245,22 @@ class FrictionFit:
     vs_rss: np.ndarray
     wall_time_s: float
     warnings: list[str] = field(default_factory=list)
+    laws: dict[str, LawFit] = field(default_factory=dict)
+    chosen: str = "stribeck"
+    selection: dict[str, Any] = field(default_factory=dict)
+    adequacy: Adequacy | None = None
+
+    @property
+    def law(self) -> LawFit:
+        """The chosen law's fit (``laws[chosen]``)."""
+        return self.laws[self.chosen]
+
+    def law_units(self) -> dict[str, str]:
+        """Units of the candidate laws' parameters (rotary or linear sweep)."""
+        f, v = self.data.force_unit, self.data.speed_unit
+        base = {"Fc": f, "Fs": f, "vs": v, "sigma2": f"{f}*s/{'m' if self.data.linear else 'rad'}",
+                "delta": "-"}
+        return {**base, **{f"{k}_neg": u for k, u in base.items()}}
 
     @property
     def params(self) -> dict[str, float]:
@@ -209,12 +271,24 @@ class FrictionFit:
         return static_curve(self.data.omega if w is None else w, *self.x, delta=self.delta)
 
     def to_json(self) -> dict[str, Any]:
-        """The content of identification.json (values under the names of ``ema params``)."""
+        """The content of identification.json (values under the names of ``ema params``):
+        ``parameters`` are the chosen law's; ``symmetric_stribeck`` the model's own law (the
+        simulator's LuGre curve) fitted as before; ``laws`` every candidate."""
         u = self.uncertainty
         resid = self.data.torque - self.model()
         truth = self.data.truth
+        units = self.law_units()
+        law = self.law
         out: dict[str, Any] = {
             "mode": "friction-sweep",
+            "chosen_law": self.chosen,
+            "selection": self.selection,
+            "parameters": law.uncertainty.to_json(units),
+            "differences_neg_minus_pos": law.differences(),
+            "adequacy": None if self.adequacy is None else self.adequacy.to_json(),
+            "laws": {k: v.to_json(units) for k, v in self.laws.items()},
+            "units": {"speed": self.data.speed_unit, "friction": self.data.force_unit},
+            "data_notes": list(self.data.notes),
             "model": "steady-state LuGre friction at the motor shaft: T(w) = sign(w)*(Fc + "
                      "(Fs - Fc)*exp(-|w/vs|^delta)) + sigma2*w (model.lugre.steady_friction_nb)",
             "method": "variable projection: linear least squares for (Fc, Fs, sigma2) at each "
@@ -223,7 +297,7 @@ class FrictionFit:
                      "omega_range_rad_s": [float(self.data.omega.min()),
                                            float(self.data.omega.max())]},
             "fixed": {"delta": self.delta},
-            "parameters": u.to_json(SWEEP_UNITS),
+            "symmetric_stribeck": u.to_json(SWEEP_UNITS),
             "correlation": {"names": list(SWEEP_NAMES), "matrix": u.corr.tolist()},
             "covariance_si": u.cov.tolist(),
             "cost": {"rss_N2m2": self.rss, "dof": u.dof,
@@ -240,19 +314,22 @@ class FrictionFit:
             "wall_time_s": self.wall_time_s,
         }
         if truth is not None:
-            out["truth"] = {n: truth[n] for n in SWEEP_NAMES if n in truth}
+            out["truth"] = {n: truth[n] for n in law.names if n in truth}
             out["error_pct_vs_truth"] = {
-                n: 100.0 * (float(self.x[j]) / truth[n] - 1.0)
-                for j, n in enumerate(SWEEP_NAMES) if truth.get(n)}
+                n: 100.0 * (float(law.x[j]) / truth[n] - 1.0)
+                for j, n in enumerate(law.names) if truth.get(n)}
         return out
 
 
 def fit_friction_sweep(data: SweepData, delta: float = 1.0,
-                       vs_bounds: tuple[float, float] | None = None) -> FrictionFit:
-    """Fit Fc, Fs, vs, sigma2 to ``data`` by variable projection (see the module docstring).
+                       vs_bounds: tuple[float, float] | None = None,
+                       laws: tuple[str, ...] = LAWS, fit_delta: bool = False) -> FrictionFit:
+    """Fit Fc, Fs, vs, sigma2 to ``data`` by variable projection (see the module docstring),
+    then every candidate law of ``laws`` (``friction.laws``), choose one by BIC and judge its
+    shape against the data's scatter (``identify.shape_adequacy``).
 
-    ``delta`` the Stribeck exponent (fixed); ``vs_bounds`` [rad/s] the vs search range
-    (default: min|w|/10 .. max|w|*10).
+    ``delta`` the Stribeck exponent (fixed unless ``fit_delta``); ``vs_bounds`` [rad/s] the
+    vs search range of the symmetric law (default: min|w|/10 .. max|w|*10).
     """
     from scipy.optimize import least_squares, minimize_scalar
 
@@ -291,5 +368,71 @@ def fit_friction_sweep(data: SweepData, delta: float = 1.0,
     if x[0] < 0 or x[1] < 0:
         warnings.append("a negative Coulomb or static friction: the data do not look like a "
                         "friction curve (torque sign convention: friction opposes the motion)")
+    fits = fit_laws(data, laws, delta, fit_delta, warnings)
+    chosen, selection = select_law(fits)
+    adequacy = sweep_adequacy(data, fits[chosen])
+    warnings.extend(data.notes)
     return FrictionFit(data, float(delta), x, float(r @ r), unc, grid, rss,
-                       time.perf_counter() - t0, warnings)
+                       time.perf_counter() - t0, warnings, fits, chosen, selection, adequacy)
+
+
+def fit_laws(data: SweepData, laws: tuple[str, ...], delta: float, fit_delta: bool,
+             warnings: list[str]) -> dict[str, LawFit]:
+    """Every candidate law the data have points enough for (the others noted in
+    ``warnings``)."""
+    out = {}
+    w, T = data.omega, data.torque
+    n_pos = np.unique(w[w > 0]).shape[0]
+    n_neg = np.unique(w[w < 0]).shape[0]
+    for law in laws:
+        if law not in LAWS:
+            raise EmaError(f"unknown friction law '{law}'; expected one of {', '.join(LAWS)}")
+        need = min_points(law, fit_delta)
+        have = min(n_pos, n_neg) if law.endswith("-dir") else np.unique(np.abs(w)).shape[0]
+        if have < need:
+            warnings.append(f"law {law} skipped: it needs {need} distinct speeds"
+                            f"{' per direction' if law.endswith('-dir') else ''}, the data "
+                            f"have {have}")
+            continue
+        out[law] = fit_law(law, w, T, delta, fit_delta)
+    if not out:
+        raise EmaError(f"{data.source}: no candidate law has enough distinct speeds")
+    return out
+
+
+def sweep_adequacy(data: SweepData, law: LawFit) -> Adequacy:
+    """The chosen law's residuals against the sweep's scatter: pure error of repeated speeds
+    when there are any, else second differences of neighbours (an upper bound); regions:
+    up to SHAPE_BINS speed ranges per direction."""
+    w, T = data.omega, data.torque
+    resid = T - law.curve(w)
+    groups = repeat_groups(w)
+    ss_pe, dof_pe = pure_error(T, groups)
+    unit = data.force_unit
+    regions = []
+    for sign, name in ((1.0, "+"), (-1.0, "-")):
+        idx = np.flatnonzero(np.sign(w) == sign)
+        for b in quantile_bins(np.abs(w[idx]), SHAPE_BINS):
+            sel = idx[b]
+            lo, hi = float(np.abs(w[sel]).min()), float(np.abs(w[sel]).max())
+            regions.append((f"{name} direction, |speed| {lo:.3g} .. {hi:.3g} "
+                            f"{data.speed_unit}", sel))
+    if dof_pe >= MIN_SCATTER_DOF:
+        k = len(law.names)
+        g = len(groups)
+        lof = (max(law.rss - ss_pe, 0.0), g - k, ss_pe, dof_pe)
+        return assess_shape(resid, math.sqrt(ss_pe / dof_pe), dof_pe,
+                            f"repeated speeds: {dof_pe} dof", unit, regions, lof=lof)
+    d2 = []
+    for sign in (1.0, -1.0):
+        idx = np.flatnonzero(np.sign(w) == sign)
+        order = idx[np.argsort(np.abs(w[idx]), kind="stable")]
+        d2.append(np.diff(T[order], 2))
+    d2a = np.concatenate(d2)
+    if d2a.shape[0] < MIN_SCATTER_DOF:
+        return assess_shape(resid, math.nan, 0, "neighbour differences", unit, regions)
+    mad = float(np.median(np.abs(d2a - np.median(d2a))))
+    scatter = mad / MAD_NORMAL / math.sqrt(6.0)
+    return assess_shape(resid, scatter, int(d2a.shape[0]),
+                        "second differences of neighbouring speeds, an upper bound", unit,
+                        regions, unbiased=False)

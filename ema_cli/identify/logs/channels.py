@@ -43,16 +43,35 @@ LOG_CHANNELS: dict[str, tuple[str, str]] = {
 }
 """ema's log channels -> (kind of unit, the channel's own unit): the keys of a column map."""
 COLUMNS_OPTION = "--columns"  # the CLI option of the column map (settings key: columns)
+Channels = Mapping[str, tuple[str, str]]  # channel -> (kind of unit, its own unit)
 
 
-def parse_column_spec(channel: str, spec: str) -> tuple[str, str]:
-    """``COLUMN[:UNIT]`` of ``channel`` -> (column, unit); the unit defaults to the channel's
-    own. The last ``:`` separates the unit (a column named ``a:b`` is written ``a:b:UNIT``).
-    Errors name the channel and what is allowed."""
-    if channel not in LOG_CHANNELS:
-        raise EmaError(f"unknown channel '{channel}'; expected one of {', '.join(LOG_CHANNELS)}")
-    kind, own = LOG_CHANNELS[channel]
-    column, sep, unit = str(spec).rpartition(":")
+def _split_unit(spec: str) -> tuple[str, str, str]:
+    """``COLUMN[:UNIT]`` split at the last ``:`` outside brackets (a MATLAB selector such as
+    ``rec.data[:, 2]`` holds ``:`` of its own) -> (column, sep, unit)."""
+    depth, cut = 0, -1
+    for i, ch in enumerate(spec):
+        if ch in "[(":
+            depth += 1
+        elif ch in "])":
+            depth -= 1
+        elif ch == ":" and depth == 0:
+            cut = i
+    if cut < 0:
+        return spec, "", ""
+    return spec[:cut], ":", spec[cut + 1:]
+
+
+def parse_column_spec(channel: str, spec: str,
+                      channels: Channels = LOG_CHANNELS) -> tuple[str, str]:
+    """``COLUMN[:UNIT]`` of ``channel`` (a key of ``channels``) -> (column, unit); the unit
+    defaults to the channel's own. The last ``:`` outside brackets separates the unit (a
+    column named ``a:b`` is written ``a:b:UNIT``); COLUMN may be a MATLAB selector
+    (``ema_cli.logs.parse_selector``). Errors name the channel and what is allowed."""
+    if channel not in channels:
+        raise EmaError(f"unknown channel '{channel}'; expected one of {', '.join(channels)}")
+    kind, own = channels[channel]
+    column, sep, unit = _split_unit(str(spec))
     if not sep:
         column, unit = str(spec), own
     column, unit = column.strip(), unit.strip()
@@ -85,27 +104,30 @@ class LogColumns:
 
 
 def read_log(path: str | Path, required: Sequence[str], optional: Sequence[str] = (),
-             columns: Mapping[str, str] | None = None) -> LogColumns:
-    """Read the ``required`` and ``optional`` channels of a log file through the column map
-    ``columns`` (channel -> ``COLUMN[:UNIT]``), checked and converted to SI. Errors name the
-    file, the column (and the ``--columns`` entry that chose it) and the place."""
-    spec = {ch: parse_column_spec_option(ch, s, path) for ch, s in (columns or {}).items()}
+             columns: Mapping[str, str] | None = None,
+             channels: Channels = LOG_CHANNELS) -> LogColumns:
+    """Read the ``required`` and ``optional`` channels (keys of ``channels``) of a log file
+    through the column map ``columns`` (channel -> ``COLUMN[:UNIT]``), checked and converted
+    to SI. Errors name the file, the column (and the ``--columns`` entry that chose it) and
+    the place."""
+    spec = {ch: parse_column_spec_option(ch, s, path, channels)
+            for ch, s in (columns or {}).items()}
     table = read_log_table(path)
     p = table.path
     names, units = {}, {}
     for ch in (*required, *optional):
-        col, unit = spec.get(ch, (ch, LOG_CHANNELS[ch][1]))
-        if ch in spec and col not in table.raw:
+        col, unit = spec.get(ch, (ch, channels[ch][1]))
+        if ch in spec and not table.has(col):
             raise EmaError(f"{COLUMNS_OPTION} {ch}={columns[ch]}: data file '{p}' has no "
                            f"{table.noun} '{col}'; it has {table.listing()}")
         names[ch], units[ch] = col, unit
-    missing = [ch for ch in required if names[ch] not in table.raw]
+    missing = [ch for ch in required if not table.has(names[ch])]
     if missing:
         opt = f" (optional: {', '.join(optional)})" if optional else ""
         raise EmaError(f"data file '{p}' lacks {table.noun}(s) {', '.join(missing)}; expected "
                        f"{', '.join(required)}{opt}; map other names with {COLUMNS_OPTION} "
                        f"CHANNEL=COLUMN[:UNIT]; found {table.listing()}")
-    present = [ch for ch in optional if names[ch] in table.raw]
+    present = [ch for ch in optional if table.has(names[ch])]
     used = [*required, *present]
     values = {}
     for ch in used:
@@ -115,7 +137,7 @@ def read_log(path: str | Path, required: Sequence[str], optional: Sequence[str] 
             if names[ch] == ch:
                 raise
             raise EmaError(f"{exc.message} ({COLUMNS_OPTION} {ch}={columns[ch]})") from None
-        values[ch] = log_to_si(raw, units[ch], LOG_CHANNELS[ch][0])
+        values[ch] = log_to_si(raw, units[ch], channels[ch][0])
     lengths = {ch: v.shape[0] for ch, v in values.items()}
     first = used[0]
     for ch in used[1:]:
@@ -127,10 +149,11 @@ def read_log(path: str | Path, required: Sequence[str], optional: Sequence[str] 
                       present, table)
 
 
-def parse_column_spec_option(channel: str, spec: str, path: str | Path) -> tuple[str, str]:
+def parse_column_spec_option(channel: str, spec: str, path: str | Path,
+                             channels: Channels = LOG_CHANNELS) -> tuple[str, str]:
     """:func:`parse_column_spec` with the option and the file named in the error."""
     try:
-        return parse_column_spec(channel, spec)
+        return parse_column_spec(channel, spec, channels)
     except EmaError as exc:
         raise EmaError(f"{COLUMNS_OPTION} {channel}={spec} (data file '{path}'): "
                        f"{exc.message}") from None

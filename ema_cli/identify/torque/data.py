@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ema_cli.errors import EmaError
-from ema_cli.files import read_csv
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -43,6 +42,7 @@ class IdentData:
     noise_pct: float = 0.0
     noise_std: float = 0.0
     tau: float | None = None  # the simulator's contact_tau (synthetic data) [s]
+    notes: tuple[str, ...] = ()  # what loading did (a derived twist rate)
 
     @property
     def n_samples(self) -> int:
@@ -134,50 +134,49 @@ def synthetic_data(
                      float(noise_pct), std, params["contact_tau"])
 
 
-def load_csv(path: str | Path, columns: Mapping[str, str] | None = None) -> IdentData:
-    """Read and validate an identification CSV.
+TORQUE_CHANNELS: dict[str, tuple[str, str]] = {
+    "t_s": ("time", "s"), "dtheta_rad": ("angle", "rad"), "domega_rad_s": ("speed", "rad/s"),
+    "torque_nm": ("torque", "N*m")}
+"""The channels of torque-twist data -> (kind of unit, own unit) for ``--columns``."""
 
-    ``columns`` maps the canonical names (:data:`CSV_COLUMNS`) to the file's column names, e.g.
-    ``{"torque_nm": "T_meas"}``. Every problem (missing file or columns, non-numeric, NaN or inf
-    values, fewer than :data:`MIN_ROWS` rows, time not strictly increasing) is an EmaError that
-    names the file.
+
+def load_csv(path: str | Path, columns: Mapping[str, str] | None = None) -> IdentData:
+    """Read and validate torque-twist data: a CSV, Parquet or .mat file (``ema_cli.logs``).
+
+    ``columns`` maps the canonical names (:data:`CSV_COLUMNS`) to the file's columns with an
+    optional unit, ``{"torque_nm": "T_meas:mN*m", "dtheta_rad": "rec.data[:, 1]:arcmin"}``.
+    Without a twist-rate column (``domega_rad_s``) the rate is derived from the twist by
+    central differences (``np.gradient`` over the time stamps, noted). Every problem (missing
+    file or columns, non-numeric, NaN or inf values, fewer than :data:`MIN_ROWS` rows, time not
+    strictly increasing) is an EmaError that names the file, the column and the place.
     """
-    import pandas as pd
+    from ema_cli.identify.logs.channels import read_log
 
     p = Path(path)
-    mapping = {name: name for name in CSV_COLUMNS}
-    for canon, col in (columns or {}).items():
-        if canon not in mapping:
+    for canon in (columns or {}):
+        if canon not in TORQUE_CHANNELS:
             raise EmaError(f"--columns: unknown column '{canon}'; the mappable names are "
                            f"{', '.join(CSV_COLUMNS)}")
-        mapping[canon] = col
-    df = read_csv(p)
-    missing = [f"{col}" + (f" (for {canon})" if col != canon else "")
-               for canon, col in mapping.items() if col not in df.columns]
-    if missing:
-        raise EmaError(
-            f"data file '{p}' lacks column(s) {', '.join(missing)}; expected columns "
-            f"{', '.join(mapping.values())} (map other names with --columns NAME=COLUMN); "
-            f"found {', '.join(map(str, df.columns)) or 'none'}")
-    arrays = {}
-    for canon, col in mapping.items():
-        values = pd.to_numeric(df[col], errors="coerce").to_numpy(np.float64)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0]) + 2  # +1 header, +1 one-based
-            raise EmaError(f"data file '{p}': column '{col}' has {int(bad.sum())} empty, "
-                           f"non-numeric, NaN or inf value(s) (first at line {row})")
-        arrays[canon] = values
+    cols = read_log(p, ("t_s", "dtheta_rad", "torque_nm"), ("domega_rad_s",), columns,
+                    TORQUE_CHANNELS)
+    arrays = cols.values
     n = arrays["t_s"].shape[0]
     if n < MIN_ROWS:
         raise EmaError(f"data file '{p}' has {n} data rows; at least {MIN_ROWS} are needed")
     steps = np.diff(arrays["t_s"])
     if np.any(steps <= 0):
-        row = int(np.flatnonzero(steps <= 0)[0]) + 3
-        raise EmaError(f"data file '{p}': column '{mapping['t_s']}' (time) must be strictly "
-                       f"increasing; it is not at line {row}")
-    return IdentData(arrays["t_s"], arrays["dtheta_rad"], arrays["domega_rad_s"],
-                     arrays["torque_nm"], f"file: {p}")
+        i = int(np.flatnonzero(steps <= 0)[0]) + 1
+        raise EmaError(f"data file '{p}': {cols.label('t_s')} (time) must be strictly "
+                       f"increasing; it is not at {cols.table.where(i)}")
+    notes: tuple[str, ...] = ()
+    if "domega_rad_s" in cols.present:
+        dw = arrays["domega_rad_s"]
+    else:
+        dw = np.gradient(arrays["dtheta_rad"], arrays["t_s"])
+        notes = (f"data file '{p}' has no twist rate (domega_rad_s): derived from the twist by "
+                 "central differences",)
+    return IdentData(arrays["t_s"], arrays["dtheta_rad"], dw, arrays["torque_nm"],
+                     f"file: {p}", notes=notes)
 
 
 def check_exercises_gap(data: IdentData, alpha_lo: float, source: str) -> None:

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from ema_cli.errors import EmaError
+from ema_cli.identify.shape_adequacy import Adequacy
 from ema_cli.identify.torque.data import (
     MIN_CONTACT_SAMPLES,
     IdentData,
@@ -28,6 +29,7 @@ from ema_cli.identify.torque.data import (
 from ema_cli.identify.torque.exact import ExactResult, profile, solve_exact
 from ema_cli.identify.torque.problem import PARAM_UNITS, TorqueProblem
 from ema_cli.identify.torque.settings import IdentifySettings
+from ema_cli.identify.torque.terms import TermsFit, fit_terms, torque_adequacy
 from ema_cli.model.params import CONTACT_TAU
 from ema_cli.optim.ga import GAHistory, GAOptions, run_ga
 from ema_cli.units import DEG
@@ -69,6 +71,8 @@ class IdentificationResult:
     ga_options: GAOptions | None
     wall_time_s: float
     warnings: list[str] = field(default_factory=list)
+    adequacy: Adequacy | None = None  # the Eq. 8 optimum's shape against the data's scatter
+    terms_fit: TermsFit | None = None  # the fit with the settings' terms (None: no terms)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -220,6 +224,8 @@ class IdentificationResult:
                 "wall_time_s": opt.wall_time_s,
             },
             "runs": runs,
+            "adequacy": None if self.adequacy is None else self.adequacy.to_json(),
+            "terms": None if self.terms_fit is None else self.terms_fit.to_json(),
             "summary": self.summary(),
             "warnings": self.warnings,
             "wall_time_s": self.wall_time_s,
@@ -227,7 +233,8 @@ class IdentificationResult:
 
 
 def load_data(settings: IdentifySettings) -> IdentData:
-    """The settings' data: the CSV file if given, else synthetic data from the simulator."""
+    """The settings' data: the file if given (CSV, Parquet, .mat), else synthetic data from
+    the simulator."""
     if settings.data is not None:
         return load_csv(settings.data, settings.columns)
     syn = settings.synthetic
@@ -337,8 +344,19 @@ def run_identification(
                 for i, s in enumerate(seqs))
         else:
             runs = [_ga_run(problem, options, s, i, settings.method) for i, s in enumerate(seqs)]
+    base_resid = problem.residuals(optimum.x)
+    adequacy = torque_adequacy(data.t, data.dth, data.dw, data.torque, base_resid)
+    terms_fit = None
+    if settings.terms:
+        terms_fit = fit_terms(data.t, data.dth, data.dw, data.torque, problem.form,
+                              float(problem.tau), problem.fit_c, float(problem.c_fixed),
+                              tuple(settings.terms), settings.alpha_range,
+                              settings.offset_range, base_resid)
     return IdentificationResult(settings, data, problem, optimum, list(runs), options,
-                                time.perf_counter() - t0, bound_warnings(problem, optimum))
+                                time.perf_counter() - t0, bound_warnings(problem, optimum)
+                                + list(data.notes) + ([] if terms_fit is None
+                                                else terms_fit.warnings),
+                                adequacy, terms_fit)
 
 
 def bound_warnings(problem: TorqueProblem, optimum: ExactResult) -> list[str]:

@@ -23,7 +23,7 @@ from ema_cli.config.base import (
 )
 from ema_cli.config.run import KEY_MARK
 from ema_cli.errors import EmaError
-from ema_cli.identify.torque.data import CSV_COLUMNS
+from ema_cli.identify.torque.data import CSV_COLUMNS, TORQUE_CHANNELS
 from ema_cli.model.params import check_value
 from ema_cli.optim import ga as ga_mod
 
@@ -190,8 +190,17 @@ class IdentifySettings(Strict):
         None, description="contact form: damping ramp-in time of the model fitted [s] "
                           "(null: the synthetic data's, else the model default of `ema params`)")
     data: str | None = Field(None, description="CSV with t_s, dtheta_rad, domega_rad_s, torque_nm")
-    columns: dict[str, str] = Field(default_factory=dict,
-                                    description="column mapping, canonical name -> file column")
+    columns: dict[str, str] = Field(
+        default_factory=dict, description="column map, canonical name -> 'COLUMN[:UNIT]' "
+        "(units: time s|ms|us, twist deg|rad|mrad|arcmin, twist rate rad/s|deg/s|rpm, torque "
+        "N*m|Nm|mN*m|mNm|kN*m; COLUMN may be a .mat selector such as rec.data[:, 2])")
+    terms: list[Literal["offset", "friction", "dahl", "preload"]] = Field(
+        default_factory=list, description="terms added to Eq. 8 in a second fit: offset (twist "
+        "offset dth0), friction (+-Ft by the sign of the twist rate) or dahl (the Dahl path: "
+        "Fc_t, sigma_t), preload (anti-backlash preload); [] for none")
+    offset_range: tuple[float, float] | None = Field(
+        None, description="start grid of the twist offset dth0 [rad] (null: +-max(alpha_hi, "
+                          "5 % of the twist's range))")
     runs: PositiveInt = Field(
         1, le=MAX_RUNS,
         description=f"GA runs (seeds SeedSequence(seed).spawn(runs)), 1 .. {MAX_RUNS:,}")
@@ -210,9 +219,32 @@ class IdentifySettings(Strict):
     @field_validator("columns")
     @classmethod
     def _cols(cls, v: dict[str, str]) -> dict[str, str]:
-        for key in v:
+        from ema_cli.identify.logs.channels import parse_column_spec
+
+        for key, spec in v.items():
             if key not in CSV_COLUMNS:
                 raise ValueError(f"unknown column '{key}'; expected one of {list(CSV_COLUMNS)}")
+            try:
+                parse_column_spec(key, spec, TORQUE_CHANNELS)
+            except EmaError as exc:
+                raise ValueError(f"{KEY_MARK}{key}{KEY_MARK}{exc.message}") from None
+        return v
+
+    @field_validator("terms")
+    @classmethod
+    def _terms(cls, v: list[str]) -> list[str]:
+        from ema_cli.identify.torque.terms import check_terms
+
+        try:
+            return list(check_terms(v))
+        except EmaError as exc:
+            raise ValueError(exc.message) from None
+
+    @field_validator("offset_range")
+    @classmethod
+    def _offset(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not (math.isfinite(v[0]) and math.isfinite(v[1]) and v[1] > v[0]):
+            raise ValueError(f"needs finite LO < HI, got [{v[0]}, {v[1]}]")
         return v
 
     @model_validator(mode="after")
