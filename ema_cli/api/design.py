@@ -248,7 +248,7 @@ def primary_names(fit: Any) -> tuple[str, ...]:
     """The free parameters a sign-off rests on: all but the contact's nuisance parameters
     (``identify.closed_loop.NUISANCE``, freed by the fit unless stated), which stay at their
     estimates in every case (their intervals, often unbounded, are not corners)."""
-    from ema_cli.identify.closed_loop import NUISANCE
+    from ema_cli.identify.closed_loop.problem import NUISANCE
 
     skip = set(NUISANCE) if fit.shooting is not None and fit.settings.free_contact else set()
     return tuple(n for n in fit.names if n not in skip)
@@ -406,7 +406,7 @@ def design_cases(fit: Any) -> tuple[list[tuple[str, dict[str, float], dict[str, 
     nuisance parameters at their estimates) -> ([(name, values, sides)], notes)."""
     import numpy as np
 
-    from ema_cli.identify.closed_loop import MIN_POSITIVE
+    from ema_cli.identify.closed_loop.problem import MIN_POSITIVE
 
     names = primary_names(fit)
     idx = [fit.names.index(n) for n in names]

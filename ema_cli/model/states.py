@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ema_cli.model import drive, plant
+from ema_cli.model import drive, plant, transmission
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,10 @@ class State:
     hold: tuple[str, ...] = ()
     """Conditions (names bound like ``rate``'s arguments) under which the state is held: its rate
     is then 0 (the locked motor, a rigid axis's motor, a site that sticks)."""
+    active: tuple[str, ...] = ()
+    """Structural flags (``model.actuator.FLAGS``) the state needs to evolve at all: in a variant
+    without one of them the state keeps its initial value and takes no part in the integration
+    (its element is absent: no arithmetic, the other states' code unchanged)."""
 
 
 STATES: tuple[State, ...] = (
@@ -55,8 +59,10 @@ STATES: tuple[State, ...] = (
     State("xI", "rad", "speed-PI integral of the speed error (motor side)",
           rate=plant.speed_integral_rate_nb, side="motor", hold=("locked",)),
     State("f_amp", "N*m", "amplifier output (force or torque on the axis, load side)",
-          rate=drive.amplifier_rate_nb, side="load"),
+          rate=drive.amplifier_rate_nb, side="load", active=("amp_bw",)),
     State("z_L", "rad", "LuGre bristle deflection at the load", kind="exact", side="load"),
+    State("f_t", "N*m", "transmission friction torque (Dahl element), load side",
+          rate=transmission.friction_rate_nb, side="load", active=("trans",)),
 )
 STATE_INDEX: dict[str, int] = {s.name: k for k, s in enumerate(STATES)}
 N_STATES = len(STATES)

@@ -245,13 +245,18 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
     for s in states:
         fields = ", ".join("v" if o.name == s.name else f"x.{o.name}" for o in states)
         lines += [f"def set_{s.name}(x, v):", f"    return X({fields})", ""]
-    # RK4: a stage's state, and the step's combination, over the rk4 states (the others kept)
-    stage = ", ".join(f"x.{s.name} + hh * k.{s.name}" if s.kind == "rk4" else f"x.{s.name}"
+    # RK4: a stage's state, and the step's combination, over the rk4 states the variant has
+    # (the others kept: a state whose element is absent takes no part)
+    def integrated(s: Any) -> bool:
+        return s.kind == "rk4" and (fl_values is None
+                                    or all(bool(fl_values[f]) for f in s.active))
+
+    stage = ", ".join(f"x.{s.name} + hh * k.{s.name}" if integrated(s) else f"x.{s.name}"
                       for s in states)
     lines += ["def rk4_stage(x, hh, k):", f"    return X({stage})", ""]
     comb = ", ".join(
         f"x.{s.name} + h6 * (k1.{s.name} + 2.0 * k2.{s.name} + 2.0 * k3.{s.name} + k4.{s.name})"
-        if s.kind == "rk4" else f"x.{s.name}" for s in states)
+        if integrated(s) else f"x.{s.name}" for s in states)
     lines += ["def rk4_combine(x, h6, k1, k2, k3, k4):", f"    return X({comb})", ""]
     # the state equations, their arguments bound by name
     # (a structural flag is read from the variant, a compile-time constant, before the
@@ -260,7 +265,7 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
               "prm": LANE_FIELDS}
     calls = {}
     for s in states:
-        if s.kind != "rk4":
+        if not integrated(s):
             continue
         args = list(inspect.signature(s.rate.py_func if hasattr(s.rate, "py_func")
                                       else s.rate).parameters)
@@ -338,7 +343,8 @@ def _rates_for(variant: int | None, states: tuple = STATES) -> Any:
                 ns[f"_rate_{s.name}"] = s.rate
         code = source(states, variant)
         exec(compile(code, f"<ema_cli.sim.layout: variant {variant}>", "exec"), ns)  # noqa: S102
-        _RATES[key] = njit(forceinline=True, error_model="numpy")(ns["rates"])
+        jit = njit(forceinline=True, error_model="numpy")
+        _RATES[key] = tuple(jit(ns[n]) for n in ("rates", "rk4_stage", "rk4_combine"))
     return _RATES[key]
 
 
@@ -348,7 +354,7 @@ _RATES: dict[tuple[int | None, tuple], Any] = {}
 def variant_rates(x: Any, alg: Any, prm: Any, variant: int) -> Any:
     """The rates of the ``rk4`` states (:class:`X`) for the kernel's ``variant``: the generated
     state equations of that variant (compiled once per variant; plain Python without the JIT)."""
-    return _rates_for(int(variant))(x, alg, prm, actuator.flags_nb(variant))
+    return _rates_for(int(variant))[0](x, alg, prm, actuator.flags_nb(variant))
 
 
 @overload(variant_rates, prefer_literal=True,
@@ -357,11 +363,49 @@ def _variant_rates_ol(x, alg, prm, variant):  # noqa: ANN001, ANN202 (numba's ov
     from numba.core import types
 
     code = variant.literal_value if isinstance(variant, types.IntegerLiteral) else None
-    fn = _rates_for(code)
+    fn = _rates_for(code)[0]
     flags = actuator.flags_nb
 
     def impl(x, alg, prm, variant):  # noqa: ANN001, ANN202 (numba's overload)
         return fn(x, alg, prm, flags(variant))
+    return impl
+
+
+def variant_stage(x: Any, hh: float, k: Any, variant: int) -> Any:
+    """An RK4 stage's state ``x + hh*k`` over the states ``variant`` integrates (the others
+    kept; plain Python without the JIT)."""
+    return _rates_for(int(variant))[1](x, hh, k)
+
+
+def variant_combine(x: Any, h6: float, k1: Any, k2: Any, k3: Any, k4: Any, variant: int) -> Any:
+    """The RK4 step's combination ``x + h6*(k1 + 2 k2 + 2 k3 + k4)`` over the states
+    ``variant`` integrates (the others kept)."""
+    return _rates_for(int(variant))[2](x, h6, k1, k2, k3, k4)
+
+
+def _literal(variant: Any) -> int | None:
+    from numba.core import types
+
+    return variant.literal_value if isinstance(variant, types.IntegerLiteral) else None
+
+
+@overload(variant_stage, prefer_literal=True,
+          jit_options={"forceinline": True, "error_model": "numpy"})
+def _variant_stage_ol(x, hh, k, variant):  # noqa: ANN001, ANN202 (numba's overload API)
+    fn = _rates_for(_literal(variant))[1]
+
+    def impl(x, hh, k, variant):  # noqa: ANN001, ANN202 (numba's overload)
+        return fn(x, hh, k)
+    return impl
+
+
+@overload(variant_combine, prefer_literal=True,
+          jit_options={"forceinline": True, "error_model": "numpy"})
+def _variant_combine_ol(x, h6, k1, k2, k3, k4, variant):  # noqa: ANN001, ANN202 (numba's API)
+    fn = _rates_for(_literal(variant))[2]
+
+    def impl(x, h6, k1, k2, k3, k4, variant):  # noqa: ANN001, ANN202 (numba's overload)
+        return fn(x, h6, k1, k2, k3, k4)
     return impl
 
 
@@ -390,3 +434,4 @@ set_z = _BUILT["set_z"]
 set_xI = _BUILT["set_xI"]
 set_f_amp = _BUILT["set_f_amp"]
 set_z_L = _BUILT["set_z_L"]
+set_f_t = _BUILT["set_f_t"]

@@ -179,7 +179,8 @@ def step_nb(x, acc, mem, inp, lp, k, dt, n_steps, in_ss, in_osc, variant, dsc):
     ok = (abs(xn.w_m) < W_RUNAWAY and abs(xn.theta_L) < THETA_RUNAWAY
           and abs(xn.i) < I_RUNAWAY and abs(xn.theta_m) < _INF and abs(xn.w_L) < _INF
           and abs(xn.xI) < _INF and abs(z_new) < _INF
-          and (not fl.amp_bw or abs(xn.f_amp) < _INF) and (not fl.lugre_L or abs(zl_new) < _INF))
+          and (not fl.amp_bw or abs(xn.f_amp) < _INF) and (not fl.lugre_L or abs(zl_new) < _INF)
+          and (not fl.trans or abs(xn.f_t) < _INF))
     dies = mem.alive != 0.0 and not ok and k < n_steps
     kend = k + 1.0 if dies else mem.kend
     alive = 0.0 if dies else mem.alive
