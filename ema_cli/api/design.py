@@ -135,6 +135,15 @@ class DesignResult:
         return EXIT_CODES[self.verdict]
 
     @property
+    def unmeetable(self) -> str:
+        """On a FAIL: one sentence naming the requirements no gains inside the bounds were
+        found to meet, with the best value reached ("" otherwise; ``tune.spec.
+        blocking_summary``)."""
+        from ema_cli.tune.spec import blocking_summary
+
+        return blocking_summary(self.shortfalls) if self.verdict == "FAIL" else ""
+
+    @property
     def tests(self) -> list[str]:
         return list(self.cases[0].result.spec.tests) if self.cases else []
 
@@ -172,6 +181,7 @@ class DesignResult:
             "requirements": {
                 "margin": tr.config.requirements.margin,
                 "unmet": self.shortfalls,
+                "unmeetable": self.unmeetable,
                 "out_of_reach": dict(tr.outcome.spec.unreachable),
                 "table": tr.requirements_frame().to_dict(orient="records")},
             "acceptance": {

@@ -113,6 +113,14 @@ class TuneResult:
         return shortfalls(o.spec, o.checked[o.chosen]["verdicts"] if verdicts is None
                           else verdicts)
 
+    def unmeetable(self) -> str:
+        """With a spec and a FAIL of the tuned controller: one sentence naming the
+        requirements no gains inside the bounds were found to meet, with the best value
+        reached (``tune.spec.blocking_summary``); else ""."""
+        from ema_cli.tune.spec import blocking_summary
+
+        return blocking_summary(self.shortfalls()) if self.outcome.verdict == "FAIL" else ""
+
     def requirements_frame(self) -> pd.DataFrame:
         """With a spec (else empty): one row per requirement (a test's metric): the limit, the
         search's tightened limit, the tier, the tuned controller's value and result by the

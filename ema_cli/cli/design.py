@@ -89,7 +89,7 @@ def print_design(js: dict, log: str, folder: Path) -> None:
 
     from ema_cli.api.design import case_list
     from ema_cli.cli.output import print_table, width
-    from ema_cli.cli.requirements import print_shortfalls
+    from ema_cli.cli.requirements import print_blocking, print_shortfalls
 
     verdict = js["verdict"]
     style = {"PASS": "bold green", "FAIL": "bold red", "INCONCLUSIVE": "bold yellow"}[verdict]
@@ -129,6 +129,7 @@ def print_design(js: dict, log: str, folder: Path) -> None:
     for n in js["notes"]:
         err_console.print(textwrap.fill(f"note: {n}", width(), subsequent_indent="  "),
                           highlight=False)
+    print_blocking(js["requirements"]["unmeetable"])  # the answer last: what no gains meet
     n_pass = sum(c["passed"] for c in cases)
     console.print(f"{verdict}: {n_pass} of {len(cases)} cases pass ({corners['run']} of "
                   f"{corners['planned']} corners run) in {js['timings_s']['total']:.0f} s -> "

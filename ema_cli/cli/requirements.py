@@ -33,6 +33,17 @@ def print_shortfalls(rows: Sequence[dict[str, str]], title: str) -> None:
                                     width(), subsequent_indent="  "), highlight=False)
 
 
+def print_blocking(text: str) -> None:
+    """The sentence naming the requirements no gains inside the bounds were found to meet
+    (nothing when it is empty)."""
+    import textwrap
+
+    from ema_cli.cli.output import width
+
+    if text:
+        console.print(textwrap.fill(text, width(), subsequent_indent="  "), highlight=False)
+
+
 def print_requirements(res: Any) -> None:
     """After ``ema tune --spec``: the battery's verdict on the tuned controller and what it
     misses."""
@@ -44,3 +55,4 @@ def print_requirements(res: Any) -> None:
                   f"{o.spec.source} ({n_tests} tests) with the tuned controller, by the "
                   "battery", highlight=False)
     print_shortfalls(res.shortfalls(), "requirements not met")
+    print_blocking(res.unmeetable())

@@ -33,6 +33,9 @@ def design_markdown(js: dict[str, Any]) -> str:
     lines += ["", f"Acceptance ({acc['spec']}): {n_pass} of {len(cases)} cases pass "
               f"(the fitted actuator and {cor['run']} of {cor['planned']} interval corners"
               + (f"; {cor['not_run_because']}" if cor["not_run_because"] else "") + ")."]
+    blocking = js["requirements"]["unmeetable"]
+    if blocking:
+        lines += ["", f"**{blocking[0].upper() + blocking[1:]}.**"]
     lines += _shortfalls_markdown(js)
     ident = js["identification"]
     lines += ["", "## Identified actuator", "",

@@ -165,7 +165,9 @@ def spec_markdown(res: Any) -> list[str]:
     pick = o.checked[o.chosen]
     lines = ["## Requirements of the spec", "",
              f"Spec `{sp.source}` ({len(sp.spec.tests)} tests) with the tuned controller: "
-             f"**{pick['verdict']}** by the battery (`ema acceptance`'s own code).", "",
+             f"**{pick['verdict']}** by the battery (`ema acceptance`'s own code)."
+             + (f" **{res.unmeetable()[0].upper()}{res.unmeetable()[1:]}.**"
+                if res.unmeetable() else ""), "",
              f"- In the search (tier `search`), each requirement's limit is tightened by "
              f"{margin:g} % of its value (the search's min/max columns); the sign-off uses the "
              "spec's own. Tier `fixed`: the controller plays no part (motor locked), measured "

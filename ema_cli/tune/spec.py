@@ -436,7 +436,7 @@ def fmt_value(req: Requirement, value: float) -> str:
     from ema_cli.units import fmt_num, from_si
 
     if req.proxy:
-        return f"{fmt_num(100 * value, '', 3)} % of the step"
+        return f"followed {fmt_num(100 * value, '', 3)} % of the step"
     return fmt_num(from_si(value, req.unit), req.unit, 4)
 
 
@@ -498,6 +498,10 @@ def shortfalls(reqs: SpecRequirements, rows: Sequence[Any]) -> list[dict[str, st
         r = by_key[key]
         worst = next((v for v in bad if v.result == FAIL), bad[0])
         t = reqs.tallies[key]
+        # no gains inside the bounds were found to meet it: the controller plays no part, it is
+        # out of its reach, or no controller measured met it
+        blocking = worst.result == FAIL and (r.tier == "fixed" or key in reqs.unreachable
+                                             or (t.seen > 0 and t.met == 0))
         if worst.result != FAIL:
             why = f"not measured: {worst.reason}"
         elif r.tier == "fixed":
@@ -516,13 +520,38 @@ def shortfalls(reqs: SpecRequirements, rows: Sequence[Any]) -> list[dict[str, st
             lo, hi = (worst.value, worst.value) if worst.measured else (worst.lower, worst.upper)
             upper = worst.max is not None and lo > worst.max
             edge = hi if upper else lo  # the value lies in lo..hi: the limit must cover it
-            if math.isfinite(edge):
+            if math.isfinite(edge) and (upper or edge > 0.0):  # not ">= 0": nothing to relax to
                 relax = (f"{'<=' if upper else '>='} "
                          f"{fmt_num(_outward(edge, upper), worst.unit, 6)}")
         cond = f" ({worst.condition})" if worst.condition else ""
-        value = ("not measured" if not worst.measured and worst.result != FAIL else
-                 fmt_num(worst.value, worst.unit, 4)) + cond
+        reached = ("not measured" if not worst.measured and worst.result != FAIL else
+                   fmt_num(worst.value, worst.unit, 4))
+        value = reached + cond
         out.append({"requirement": key, "limit": r.limit_text, "result": worst.result,
-                    "value": value, "best": fmt_value(r, t.best) if t.seen else "",
-                    "why": why, "relax": relax, "tier": r.tier})
-    return out
+                    "value": value, "reached": reached,
+                    "best": fmt_value(r, t.best) if t.seen else "",
+                    "why": why, "relax": relax, "tier": r.tier, "blocking": blocking,
+                    "proxy": bool(r.proxy)})
+    return sorted(out, key=lambda row: not row["blocking"])  # stable: the spec's order
+
+
+def blocking_summary(rows: Sequence[Mapping[str, Any]]) -> str:
+    """One sentence naming the requirements no gains inside the bounds were found to meet
+    (``shortfalls`` rows with ``blocking``): first those the controller cannot move (fixed
+    tier: their value whatever the gains), then the others with the best value the search
+    reached; "" when there is none."""
+    fixed = [f"{r['requirement']} {r['limit']} ({r['reached']} whatever the gains)"
+             for r in rows if r.get("blocking") and r["tier"] == "fixed"]
+    found = [f"{r['requirement']} {r['limit']} ("
+             + (f"tuned {r['reached']}, the search's proxy {r['best']}" if r.get("proxy")
+                else f"best {r['best'] or r['reached']}") + ")"
+             for r in rows if r.get("blocking") and r["tier"] != "fixed"]
+    parts = []
+    if fixed:
+        parts.append("no gains can meet " + "; ".join(fixed))
+    if found:
+        parts.append(("and none inside the bounds was found to meet " if fixed else
+                      "no gains inside the bounds were found to meet ") + "; ".join(found))
+    if not parts:
+        return ""
+    return " ".join(parts) + ": no PASS without relaxing these limits or changing the actuator"

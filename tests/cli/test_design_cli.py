@@ -220,3 +220,37 @@ def test_end_to_end_tiny_and_inconclusive(tmp_path, monkeypatch):
     # the report (from the verdict line on) fits 80 columns; progress lines come before it
     tail = r.output[r.output.index("INCONCLUSIVE: ema design"):]
     assert all(len(ln) <= 80 for ln in tail.splitlines()), tail
+
+
+@pytest.mark.slow
+def test_the_readme_design_line_ends_in_an_answer(tmp_path, monkeypatch):
+    """README's Use section: `ema design experiments/logs/design_hc_1pct.csv`, defaults. It
+    must end PASS, or FAIL naming the requirement no gains inside the bounds meet with the
+    best value reached. The bundled spec's load deflection (motor locked, +-20 N*m) <= 0.05
+    deg cannot hold on this log's actuator: the lost motion alone, twice the identified half
+    backlash alpha (2.5 mrad: 0.286 deg, independent of any controller), exceeds it."""
+    monkeypatch.chdir(ROOT)  # the README's relative path
+    out = tmp_path / "d"
+    r = runner.invoke(app, ["design", "experiments/logs/design_hc_1pct.csv", "--out",
+                            str(out)], catch_exceptions=False)
+    assert r.exit_code in (0, 1), r.output
+    js = json.loads((out / "design.json").read_text())
+    if js["verdict"] == "PASS":
+        return
+    alpha = js["identification"]["parameters"]["alpha"]["value"]
+    assert math.degrees(2 * alpha) > 0.05  # the closed form: the spec's limit cannot hold
+    unmet = {row["requirement"]: row for row in js["requirements"]["unmet"]}
+    ld = unmet["load-deflection: free_play"]
+    assert ld["blocking"] and ld["tier"] == "fixed"
+    value_deg = float(ld["value"].split()[0])
+    assert value_deg >= math.degrees(2 * alpha) * 0.99  # at least the gap (1 % slack)
+    # the answer is the console's last words before the closing line, and design.md's first
+    text = " ".join(r.output.split())
+    assert "no gains inside the bounds were found to meet load-deflection: free_play" in text
+    assert "no PASS without relaxing these limits" in text
+    md = (out / "design.md").read_text()
+    assert "No gains inside the bounds were found to meet load-deflection" in md
+    assert str(ROOT) not in md and "/tmp" not in md  # no machine path
+    # no corner ran after the nominal FAIL, and the reason is said once
+    assert js["acceptance"]["corners"]["run"] == 0
+    assert r.output.count("interval corners not run") == 1

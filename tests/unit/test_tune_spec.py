@@ -113,6 +113,12 @@ def test_an_unmeetable_requirement_is_a_result_not_an_error():
     assert t.met == 0 and t.seen == 33 + res.outcome.timings["evaluations"]
     assert t.best == pytest.approx(t.low) and t.best > 0.1  # [s]
     assert "none of the" in short["why"] and short["relax"].startswith("<= ")
+    # named as the requirement no gains inside the bounds were found to meet, with the best
+    assert short["blocking"]
+    assert res.unmeetable() == (
+        "no gains inside the bounds were found to meet step: settling_time <= 20 ms (best "
+        f"{t.best * 1e3:.4g} ms): no PASS without relaxing these limits or changing the "
+        "actuator")
 
 
 def test_bad_specs_are_named():
@@ -143,3 +149,19 @@ def test_checked_candidates_are_distinct_and_best_first():
     # 0.505 best; 0.51 and 0.5 within 0.02 of it; then 0.1, then 0.9
     assert pick_distinct(U, scores, 3) == [1, 3, 2]
     assert pick_distinct(U, np.array([1.0, np.inf, np.inf, np.inf, np.inf]), 3) == [0]
+
+
+def test_the_unmeetable_requirements_are_summarised_fixed_first():
+    from ema_cli.tune.spec import blocking_summary
+
+    rows = [{"requirement": "rate: rate", "limit": ">= 700 deg/s", "reached": "321.1 deg/s",
+             "best": "321.3 deg/s", "tier": "search", "blocking": True},
+            {"requirement": "step: rise_time", "limit": "<= 80 ms", "reached": "86 ms",
+             "best": "21 ms", "tier": "search", "blocking": False},
+            {"requirement": "ld: free_play", "limit": "<= 0.05 deg", "reached": "0.3132 deg",
+             "best": "0.3132 deg", "tier": "fixed", "blocking": True}]
+    assert blocking_summary(rows) == (
+        "no gains can meet ld: free_play <= 0.05 deg (0.3132 deg whatever the gains) and none "
+        "inside the bounds was found to meet rate: rate >= 700 deg/s (best 321.3 deg/s): no "
+        "PASS without relaxing these limits or changing the actuator")
+    assert blocking_summary(rows[1:2]) == ""  # met by some controllers: not named
