@@ -94,8 +94,11 @@ def print_design(js: dict, log: str, folder: Path) -> None:
     verdict = js["verdict"]
     style = {"PASS": "bold green", "FAIL": "bold red", "INCONCLUSIVE": "bold yellow"}[verdict]
     console.print(f"[{style}]{verdict}[/]: ema design {log}")
+    # a value the battery could not measure: what makes the verdict INCONCLUSIVE, or beside
+    # a FAIL, not the verdict's reason
+    word = "inconclusive" if verdict == "INCONCLUSIVE" else "not measured"
     for why in js["inconclusive_because"]:
-        console.print(textwrap.fill(f"inconclusive: {why}", width(), subsequent_indent="  "),
+        console.print(textwrap.fill(f"{word}: {why}", width(), subsequent_indent="  "),
                       highlight=False)
     ident = js["identification"]
     print_table("identified actuator (SI)", ["parameter", "value", "95 % interval", "unit"],

@@ -24,8 +24,9 @@ def design_markdown(js: dict[str, Any]) -> str:
     v = js["verdict"]
     lines = [f"# ema design: {js['log']}", "", f"**Verdict: {v}** (exit code {js['exit_code']}):"
              f" {VERDICT_MEANING[v]}."]
+    word = "" if v == "INCONCLUSIVE" else "not measured (beside the verdict): "
     for why in js["inconclusive_because"]:
-        lines.append(f"- {why}")
+        lines.append(f"- {word}{why}")
     acc = js["acceptance"]
     cases = acc["cases"]
     n_pass = sum(c["passed"] for c in cases)
