@@ -40,8 +40,9 @@ def print_blocking(text: str) -> None:
 
     from ema_cli.cli.output import width
 
-    if text:
-        console.print(textwrap.fill(text, width(), subsequent_indent="  "), highlight=False)
+    if text:  # (not broken at a test name's hyphen)
+        console.print(textwrap.fill(text, width(), subsequent_indent="  ",
+                                    break_on_hyphens=False), highlight=False)
 
 
 def print_requirements(res: Any) -> None:
