@@ -63,6 +63,7 @@ bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep,
 	$(BIN)/python experiments/bench_kernel_vs_wave3.py
 	$(BIN)/python experiments/emps_simulation.py
 	$(BIN)/python -m experiments.bench_emps_fit
+	$(BIN)/python -m experiments.plant_coverage --seeds 20
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
 	rm -rf results/bench/yield-1000

@@ -49,19 +49,56 @@ def plant_inputs(settings: PlantSettings) -> Any:
 @dataclass
 class PlantValidationResult:
     """The fitted model against another record: ``result`` is
-    ``identify.plant.fit.PlantValidation``."""
+    ``identify.plant.fit.PlantValidation``; ``axis`` rotary or translational."""
 
     result: PlantValidation
+    axis: str = "translational"
 
     @property
-    def errors(self) -> pd.DataFrame:
-        """One row per model (fit, IDIM-LS): the benchmark's relative errors [%] and the RMS
-        position error [m]."""
+    def metrics(self) -> pd.DataFrame:
+        """One row per model: the benchmark's relative errors [%] and the RMS position error
+        [m] (NaN where the inverse model simulates no motion)."""
         import pandas as pd
 
         return pd.DataFrame([{"model": k, **{f"{c}_pct": v for c, v in e.as_dict().items()},
                               "rms_position_m": self.result.rms_position_m[k]}
                              for k, e in self.result.errors.items()])
+
+    errors = metrics
+
+    def to_pandas(self, form: str = "wide") -> pd.DataFrame:
+        """Time, the measured force and position and each model's (SI units in the names)."""
+        import pandas as pd
+
+        from ema_cli.api.result import long_form
+
+        r = self.result
+        cols = {"t_s": r.record.t_s, "force_measured_n": r.record.force_n,
+                "position_measured_m": r.record.q_m}
+        for k, sim in r.sims.items():
+            cols[f"force_{k}_n"] = sim["F"]
+            cols[f"position_{k}_m"] = sim["q"]
+        return long_form(pd.DataFrame(cols), form, ["t_s"])
+
+    def plot(self) -> Figure:
+        """The record's force and each model's, with the force and position residuals."""
+        from ema_cli.report.plant_report import channels_figure
+
+        r = self.result
+        sims = r.sims or {}
+        return channels_figure(r.record.t_s, {"F": r.record.force_n, "q": r.record.q_m},
+                               {k: {"F": v["F"], "q": v["q"]} for k, v in sims.items()},
+                               self.axis, f"Validation on {r.record.source}")
+
+    def save(self, folder: str | Path | None = None) -> Path:
+        """Write validation.md, validation.json (and validation.png) -> the folder."""
+        from ema_cli.report.plant_report import write_validation
+        from ema_cli.report.run_inputs import run_inputs
+        from ema_cli.report.rundir import write_run
+
+        inputs = run_inputs({"validate": self.result.record.source})
+        return write_run("identify", "validate", inputs, folder_arg(folder),
+                         lambda out: write_validation(self.result, out, self.axis))
 
 
 @dataclass
@@ -130,10 +167,11 @@ class PlantIdentification:
                  ) -> PlantValidationResult:
         """Simulate the fitted model and IDIM-LS against another record."""
         from ema_cli.identify.plant.fit import validate
+        from ema_cli.report.plant_report import axis_of
 
         v = validate(self.result, data, columns)
         self.validation = v
-        return PlantValidationResult(v)
+        return PlantValidationResult(v, axis_of(self.result))
 
     def save(self, folder: str | Path | None = None) -> Path:
         """Write the folder ``ema identify plant`` writes -> the folder."""
@@ -161,7 +199,7 @@ def identify_plant(data: str | Path | None = None, actuator: str | Path | None =
 
 
 def validate_folder(folder: str | Path, data: str | Path,
-                    columns: dict[str, str] | None = None) -> PlantValidation:
+                    columns: dict[str, str] | None = None) -> PlantValidationResult:
     """The models a folder of ``ema identify plant`` holds (its plant.json: the fit and IDIM-LS,
     the settings, the delay) simulated against another record (``ema identify validate``)."""
     import json
@@ -178,7 +216,10 @@ def validate_folder(folder: str | Path, data: str | Path,
         doc = json.loads(js.read_text())
         settings = PlantSettings(**doc["settings"])
         models, delay = doc["models"], int(doc["delay_samples"])
+        inverse = doc.get("controller_check") is None
     except (ValueError, KeyError, TypeError) as exc:
         raise EmaError(f"'{js}': not a plant.json of this version ({type(exc).__name__}); "
                        "rerun `ema identify plant`") from None
-    return validate_models(settings, delay, models, data, columns)
+    axis = "rotary" if doc.get("axis") == "rotary" else "translational"
+    return PlantValidationResult(validate_models(settings, delay, models, data, columns,
+                                                 inverse=inverse), axis)

@@ -58,7 +58,10 @@ def _print(ident: Any, folder: Path) -> None:
     fit = ident.result
     lf = fit.best
     axis = axis_of(fit)
-    console.print(f"controller check: {fit.controller.summary()}; delay used: {fit.delay}")
+    if fit.controller is not None:
+        console.print(f"controller check: {fit.controller.summary()}; delay used: {fit.delay}")
+    else:
+        console.print(f"mode: {fit.mode}")
     console.print(f"law: {fit.chosen} ({fit.choice})")
     rows = []
     for r in parameters_table(lf, axis):
@@ -86,15 +89,20 @@ def _print(ident: Any, folder: Path) -> None:
             f"{k} {v * ff:.3g} {fu}" for k, v in lf.adequacy.motion.items()))
     e = {k: v.as_dict() for k, v in fit.errors.items()}
     console.print("benchmark errors (fitted samples): " + "; ".join(
-        f"{k}: force {d['force']:.4g} %, position {d['position']:.4g} %" for k, d in e.items()))
+        f"{k}: force {d['force']:.4g} %" + (f", position {d['position']:.4g} %"
+                                            if d["position"] == d["position"] else "")
+        for k, d in e.items()))
     if fit.split is not None:
         s = {k: v.as_dict() for k, v in fit.split["errors"].items()}
         console.print(f"time split (fitted before {fit.split['t_split_s']:.4g} s, scored after): "
                       + "; ".join(f"{k}: force {d['force']:.4g} %" for k, d in s.items()))
     if ident.validation is not None:
         v = ident.validation
+        for note in v.notes:
+            console.print(f"note: {note}")
         console.print(f"validation on {v.record.source}: " + "; ".join(
-            f"{k}: force {d.force_pct:.4g} %, RMS position {v.rms_position_m[k] * 1e6:.4g} um"
+            f"{k}: force {d.force_pct:.4g} %" + (
+                f", RMS position {v.rms_position_m[k] * 1e6:.4g} um" if v.controller else "")
             for k, d in v.errors.items()))
     console.print(f"{fit.timings['total']:.1f} s ({fit.kernel['calls']} kernel calls, "
                   f"{fit.kernel['lanes']} simulations) -> {folder}")
@@ -177,11 +185,18 @@ def validate_cmd(
 def _validate(folder: Path, data: Path, columns: list[str] | None) -> None:
     from ema_cli.api.identify_plant import validate_folder
 
-    v = validate_folder(folder, data, dict(parse_assignments(columns, "--columns")) or None)
-    console.print(f"validation on {v.record.source} ({v.record.n} samples); controller check: "
-                  f"{v.controller.summary()}")
+    v = validate_folder(folder, data,
+                        dict(parse_assignments(columns, "--columns")) or None).result
+    console.print(f"validation on {v.record.source} ({v.record.n} samples); " + (
+        f"controller check: {v.controller.summary()}" if v.controller is not None else
+        "inverse model: the force predicted from the measured motion"))
+    for note in v.notes:
+        console.print(f"note: {note}")
     for k, e in v.errors.items():
         d = e.as_dict()
+        if v.controller is None:
+            console.print(f"{k}: force prediction {d['force']:.4g} %")
+            continue
         console.print(f"{k}: position {d['position']:.4g} %, velocity {d['velocity']:.4g} %, "
                       f"acceleration {d['acceleration']:.4g} %, force {d['force']:.4g} %; RMS "
                       f"position error {v.rms_position_m[k] * 1e6:.4g} um")

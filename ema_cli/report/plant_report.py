@@ -95,15 +95,18 @@ def plant_json(fit: PlantFit) -> dict[str, Any]:
     return {
         "settings": fit.settings.model_dump(mode="json"),
         "delay_samples": fit.delay,
-        "models": {"output error": fit.best.estimate,
-                   "IDIM-LS": dict(zip(fit.baseline.names, map(float, fit.baseline.theta),
-                                       strict=True))},
+        "models": ({"output error": fit.best.estimate,
+                    "IDIM-LS": dict(zip(fit.baseline.names, map(float, fit.baseline.theta),
+                                        strict=True))} if fit.controller is not None else
+                   {f"IDIM-LS ({fit.chosen})": fit.best.estimate}),
         "record": {"source": rec.source, "samples": rec.n, "sample_interval_s": rec.h_s,
                    "duration_s": float(rec.t_s[-1]), "names": rec.names,
                    "gain": fit.extras["gain"], "gain_from": fit.extras["gain_from"],
                    "fitted_samples": int(np.count_nonzero(fit.use))},
         "axis": axis,
-        "controller_check": {**fit.controller.as_dict(), "delay_used": fit.delay},
+        "mode": fit.mode,
+        "controller_check": (None if fit.controller is None else
+                             {**fit.controller.as_dict(), "delay_used": fit.delay}),
         "baseline_idim_ls": fit.baseline.as_dict(),
         "chosen_law": fit.chosen, "why": fit.choice,
         "laws": laws,
@@ -126,8 +129,9 @@ def plant_markdown(fit: PlantFit, validation: PlantValidation | None = None) -> 
     lines = [f"# Plant identification: {md_cell(Path(str(fit.settings.data)).name)}", "",
              f"Record: {fit.record.n} samples every {fit.record.h_s * 1e3:.4g} ms "
              f"({fit.record.t_s[-1]:.4g} s), {int(np.count_nonzero(fit.use))} fitted. "
-             f"Controller check: {md_cell(fit.controller.summary())}; delay used: {fit.delay} "
-             "sample(s).", "",
+             + (f"Controller check: {md_cell(fit.controller.summary())}; delay used: "
+                f"{fit.delay} sample(s)." if fit.controller is not None else
+                f"Mode: {md_cell(fit.mode)}."), "",
              f"**Law: {fit.chosen}** ({md_cell(fit.choice)}).", "",
              f"**Determined: {'yes' if ok else 'NO (' + ', '.join(bad) + ')'}** - 95 % "
              f"intervals from the cluster-robust covariance (CR3 jackknife over {lf.clusters} "
@@ -143,7 +147,7 @@ def plant_markdown(fit: PlantFit, validation: PlantValidation | None = None) -> 
               "| model | position | velocity | acceleration | force |", "|---|---|---|---|---|"]
     for k, e in fit.errors.items():
         d = e.as_dict()
-        lines.append(f"| {k} | " + " | ".join(f"{d[c]:.4g}" for c in
+        lines.append(f"| {k} | " + " | ".join(_fmt(d[c], 4) for c in
                                                ("position", "velocity", "acceleration",
                                                 "force")) + " |")
     if fit.split is not None:
@@ -153,7 +157,7 @@ def plant_markdown(fit: PlantFit, validation: PlantValidation | None = None) -> 
                   "| model | position | velocity | acceleration | force |", "|---|---|---|---|---|"]
         for k, e in s["errors"].items():
             d = e.as_dict()
-            lines.append(f"| {k} | " + " | ".join(f"{d[c]:.4g}" for c in
+            lines.append(f"| {k} | " + " | ".join(_fmt(d[c], 4) for c in
                                                    ("position", "velocity", "acceleration",
                                                     "force")) + " |")
     if validation is not None:
@@ -180,15 +184,17 @@ def plant_markdown(fit: PlantFit, validation: PlantValidation | None = None) -> 
 
 def validation_markdown(v: PlantValidation) -> str:
     """The errors of the fit and of the IDIM-LS baseline on another record."""
-    lines = [f"Record {md_cell(v.record.source)}: {v.record.n} samples; controller check: "
-             f"{md_cell(v.controller.summary())}.", "",
+    check = ("controller check: " + md_cell(v.controller.summary()) if v.controller is not None
+             else "inverse model: the force predicted from the measured motion")
+    lines = [f"Record {md_cell(v.record.source)}: {v.record.n} samples; {check}.", "",
+             *[f"Note: {md_cell(n)}" for n in v.notes], *([""] if v.notes else []),
              "| model | position | velocity | acceleration | force | RMS position error |",
              "|---|---|---|---|---|---|"]
     for k, e in v.errors.items():
         d = e.as_dict()
-        lines.append(f"| {k} | " + " | ".join(f"{d[c]:.4g} %" for c in
+        lines.append(f"| {k} | " + " | ".join(_fmt(d[c], 4) + " %" for c in
                                                ("position", "velocity", "acceleration", "force"))
-                     + f" | {v.rms_position_m[k] * 1e6:.4g} um |")
+                     + f" | {_fmt(v.rms_position_m[k] * 1e6, 4)} um |")
     return "\n".join(lines)
 
 
@@ -204,18 +210,21 @@ def channels_figure(t: np.ndarray, measured: dict[str, np.ndarray],
     ax[0].plot(t, measured["F"] * ff, color="0.6", lw=1.6, label="measured")
     for k, (name, s) in enumerate(sims.items()):
         ax[0].plot(t, s["F"] * ff, color=f"C{k}", lw=0.9, ls="-" if k == 0 else "--",
-                   label=f"simulated: {name}")
-        ax[1].plot(t, (measured["F"] - s["F"]) * ff, color=f"C{k}", lw=0.7,
-                   label=f"{name}: RMS {np.sqrt(np.mean((measured['F'] - s['F']) ** 2)) * ff:.3g}"
-                         f" {fu}")
-        ax[2].plot(t, (measured["q"] - s["q"]) * sf, color=f"C{k}", lw=0.7,
-                   label=f"{name}: RMS {np.sqrt(np.mean((measured['q'] - s['q']) ** 2)) * sf:.3g}"
-                         f" {su}")
+                   label=f"model: {name}")
+        rF = (measured["F"] - s["F"]) * ff
+        ax[1].plot(t, rF, color=f"C{k}", lw=0.7,
+                   label=f"{name}: RMS {_fmt(float(np.sqrt(np.nanmean(rF ** 2))), 3)} {fu}")
+        if np.all(np.isnan(s["q"])):
+            continue
+        rq = (measured["q"] - s["q"]) * sf
+        ax[2].plot(t, rq, color=f"C{k}", lw=0.7,
+                   label=f"{name}: RMS {_fmt(float(np.sqrt(np.nanmean(rq ** 2))), 3)} {su}")
     if use is not None and use.any() and not use.all():
         for a, key, f in ((ax[1], "F", ff), (ax[2], "q", sf)):
-            worst = max(float(np.max(np.abs(measured[key][use] - s[key][use]))) * f
-                        for s in sims.values())
-            a.set_ylim(-1.15 * worst, 1.15 * worst)
+            worst = max(float(np.nanmax(np.abs(measured[key][use] - s[key][use]), initial=0.0))
+                        * f for s in sims.values())
+            if np.isfinite(worst) and worst > 0:
+                a.set_ylim(-1.15 * worst, 1.15 * worst)
         edges = np.flatnonzero(np.diff(np.r_[0, (~use).astype(int), 0]))
         for k0, k1 in zip(edges[::2], edges[1::2], strict=True):
             for a in ax:
@@ -225,9 +234,13 @@ def channels_figure(t: np.ndarray, measured: dict[str, np.ndarray],
     ax[1].set_ylabel(f"force residual\nmeasured - simulated [{fu}]")
     ax[2].set_ylabel(f"position residual\nmeasured - simulated [{su}]")
     ax[2].set_xlabel("time [s]")
+    if all(np.all(np.isnan(s["q"])) for s in sims.values()):
+        ax[2].text(0.5, 0.5, "inverse model: no simulated position (no closed loop to run)",
+                   transform=ax[2].transAxes, ha="center", va="center", color="0.4")
     for a in ax:
         a.grid(alpha=0.3)
-        a.legend(loc="upper right", fontsize=8)
+        if a.get_legend_handles_labels()[0]:
+            a.legend(loc="upper right", fontsize=8)
     ax[0].set_title(title)
     fig.tight_layout()
     return fig
@@ -307,9 +320,10 @@ def fitted_description(fit: PlantFit) -> dict[str, Any]:
             site[key] = f"{est[name]:.10g} {unit}"
     fr["load"] = site
     desc["friction"] = fr
-    ctrl = dict(desc.get("controller", {}))
-    ctrl["delay_samples"] = fit.delay
-    desc["controller"] = ctrl
+    if fit.controller is not None:
+        ctrl = dict(desc.get("controller", {}))
+        ctrl["delay_samples"] = fit.delay
+        desc["controller"] = ctrl
     desc["description"] = (f"{desc.get('description', '')} Fitted by ema identify plant on "
                            f"{Path(str(fit.settings.data)).name} (law {fit.chosen}).").strip()
     return desc
@@ -329,6 +343,7 @@ def write_plant(fit: PlantFit, out: Path, validation: PlantValidation | None = N
         js["validation"] = {"source": validation.record.source,
                             "errors_pct": {k: v.as_dict() for k, v in validation.errors.items()},
                             "rms_position_m": validation.rms_position_m,
+                            "notes": validation.notes,
                             "controller_check": validation.controller.as_dict()}
     write_json(out / "plant.json", js)
     write_text(out / "plant.md", plant_markdown(fit, validation))
@@ -339,16 +354,21 @@ def write_plant(fit: PlantFit, out: Path, validation: PlantValidation | None = N
     write_text(out / "actuator_fitted.yaml",
                yaml.safe_dump({"actuator": fitted_description(fit)}, sort_keys=False))
     r = fit.record
-    sims = {f"fit ({fit.chosen})": {"F": fit.best.F, "q": fit.best.q},
-            "IDIM-LS (benchmark reference model)": fit.baseline_sim}
+    if fit.controller is None:  # the inverse model: predicted force, no simulated motion
+        nanq = np.full(r.n, np.nan)
+        sims = {f"IDIM-LS ({fit.chosen})": {"F": fit.best.F, "q": nanq}}
+    else:
+        sims = {f"fit ({fit.chosen})": {"F": fit.best.F, "q": fit.best.q},
+                "IDIM-LS (benchmark reference model)": fit.baseline_sim}
     write_figure(out / "fit.png", channels_figure(
         r.t_s, {"F": r.force_n, "q": r.q_m}, sims, axis,
-        f"Closed-loop simulation from the reference vs the record "
-        f"{Path(str(fit.settings.data)).name}", fit.use))
+        ("Closed-loop simulation from the reference" if fit.controller is not None else
+         "Inverse model (force from the measured motion)")
+        + f" vs the record {Path(str(fit.settings.data)).name}", fit.use))
     write_figure(out / "residual_tests.png", residual_tests_figure(fit.best))
     files = ["plant.json", "plant.md", "parameters.csv", "fit.csv", "actuator_fitted.yaml",
              "fit.png", "residual_tests.png"]
-    if validation is not None:
+    if validation is not None and validation.sims:
         v = validation
         write_figure(out / "validation.png", channels_figure(
             v.record.t_s, {"F": v.record.force_n, "q": v.record.q_m},
@@ -357,6 +377,28 @@ def write_plant(fit: PlantFit, out: Path, validation: PlantValidation | None = N
             f"Validation: the fitted model on {v.record.source.split(chr(39))[1]}"
             if "'" in v.record.source else "Validation"))
         files.append("validation.png")
+    if validation is not None:
+        write_text(out / "validation.md", validation_markdown(validation) + "\n")
+        files.append("validation.md")
     write_json(out / "manifest.json", manifest("identify plant", timings_s=fit.timings,
                                                kernel=fit.kernel, **fields))
+    return files + ["manifest.json"]
+
+
+def write_validation(v: PlantValidation, out: Path, axis: str) -> list[str]:
+    """A validation's own folder: validation.md, validation.json, validation.png (when the
+    models were simulated) and manifest.json."""
+    write_text(out / "validation.md", "# Validation\n\n" + validation_markdown(v) + "\n")
+    write_json(out / "validation.json", {
+        "source": v.record.source, "errors_pct": {k: e.as_dict() for k, e in v.errors.items()},
+        "rms_position_m": v.rms_position_m, "notes": v.notes,
+        "controller_check": None if v.controller is None else v.controller.as_dict()})
+    files = ["validation.md", "validation.json"]
+    if v.sims:
+        write_figure(out / "validation.png", channels_figure(
+            v.record.t_s, {"F": v.record.force_n, "q": v.record.q_m},
+            {k: {"F": s["F"], "q": s["q"]} for k, s in v.sims.items()}, axis,
+            f"Validation on {v.record.source}"))
+        files.append("validation.png")
+    write_json(out / "manifest.json", manifest("identify validate"))
     return files + ["manifest.json"]

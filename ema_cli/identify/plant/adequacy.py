@@ -172,10 +172,11 @@ class OmittedTerm:
                 "t": self.t, "p": self.p, "rms_reduction": self.gain, "missed": self.missed}
 
 
-def candidate_columns(v: np.ndarray, law: Sequence[str], v_unit: str = "m/s"
-                      ) -> list[tuple[str, str, np.ndarray]]:
+def candidate_columns(v: np.ndarray, law: Sequence[str], v_unit: str = "m/s",
+                      q: np.ndarray | None = None) -> list[tuple[str, str, np.ndarray]]:
     """The candidate terms the law lacks, as (name, meaning, column [n]) on the velocity ``v``
-    [``v_unit``: m/s or rad/s]."""
+    [``v_unit``: m/s or rad/s]; with a rotary axis' angle ``q`` [rad] also a gravity-like
+    torque ``cos q`` and ``sin q``."""
     law = set(law)
     speed = np.abs(v)
     vref = float(np.percentile(speed, 90)) if speed.size else 1.0
@@ -192,11 +193,17 @@ def candidate_columns(v: np.ndarray, law: Sequence[str], v_unit: str = "m/s"
     out.append(("drag v|v|", "quadratic drag (v |v|)", v * speed))
     if "OF" not in law and not ({"Fc+", "Fc-"} <= law):
         out.append(("offset", "a constant force", np.ones_like(v)))
+    if q is not None and float(np.ptp(q)) > 0.05:  # an angle that moves enough to tell
+        out.append(("gravity cos q", "a torque varying with the angle as cos q (gravity)",
+                    np.cos(q)))
+        out.append(("gravity sin q", "a torque varying with the angle as sin q (gravity)",
+                    np.sin(q)))
     return out
 
 
 def omitted_terms(r_force: np.ndarray, v: np.ndarray, law: Sequence[str],
-                  clusters: Sequence[np.ndarray], v_unit: str = "m/s") -> list[OmittedTerm]:
+                  clusters: Sequence[np.ndarray], v_unit: str = "m/s",
+                  q: np.ndarray | None = None) -> list[OmittedTerm]:
     """Each candidate term (:func:`candidate_columns`) regressed alone on the force residual
     ``r_force`` = measured - simulated [N], with the CR3 cluster-robust standard error over
     ``clusters`` (index arrays of the samples) -> the tests, Bonferroni over the candidates."""
@@ -204,7 +211,7 @@ def omitted_terms(r_force: np.ndarray, v: np.ndarray, law: Sequence[str],
 
     from ema_cli.identify.uncertainty import covariance_clustered
 
-    cands = candidate_columns(v, law, v_unit)
+    cands = candidate_columns(v, law, v_unit, q)
     out = []
     rms0 = float(np.sqrt(np.mean(r_force**2)))
     k = max(len(cands), 1)

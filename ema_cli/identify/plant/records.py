@@ -246,15 +246,18 @@ def _to_si(v: np.ndarray, unit: str | None, role: str) -> np.ndarray:
 
 def read_plant_record(path: str | Path, columns: dict[str, str] | None = None,
                       gain: float | None = None, saturation: float | None = None,
-                      need_reference: bool = True) -> tuple[PlantRecord, dict[str, Any]]:
+                      need_reference: bool = True, limit_force: float | None = None
+                      ) -> tuple[PlantRecord, dict[str, Any]]:
     """A closed-loop record in any log format (CSV, Parquet, MATLAB v5/v7.3) -> (record,
     extras). ``columns`` maps roles (:data:`ROLE_KINDS` and ``gain``) to ``NAME[:UNIT]`` (default
     :data:`ROLE_DEFAULTS`, the EMPS names; no unit: SI). The force is ``gain * actuation``
     with the gain from the record's variable (``gain=NAME``, EMPS ``gtau``) when it has one,
     else ``gain`` [N per unit of actuation] (the description's amplifier), else 1 for an
     actuation in N. ``extras``: ``actuation`` (the command as logged, its unit), ``gain``,
-    ``disturbance`` (a logged input added to the controller's output, or None). Every problem
-    is one EmaError naming the file, the variable and the sample."""
+    ``disturbance`` (a logged input added to the controller's output, or None). ``saturation``
+    the command's limit (its units), ``limit_force`` the same as a force [N] for an actuation
+    logged as a force. Every problem is one EmaError naming the file, the variable and the
+    sample."""
     from ema_cli.identify.logs.channels import read_log_table
 
     spec = {**ROLE_DEFAULTS, **(columns or {})}
@@ -293,6 +296,8 @@ def read_plant_record(path: str | Path, columns: dict[str, str] | None = None,
     if g == 0:
         raise EmaError(f"{source}: the actuation's gain ({g_from}) is 0; expected nonzero")
     t, q, u = vals["time"], vals["position"], vals["actuation"]
+    if unit_a in ("N", "kN", "N*m"):  # a force: its limit is the command's times the gain
+        saturation = limit_force
     h = check_signals(source, names, t, q, u, one_based, saturation)
     ref = vals.get("reference")
     for role in ("reference", "disturbance"):
@@ -309,6 +314,9 @@ def read_plant_record(path: str | Path, columns: dict[str, str] | None = None,
     rec = PlantRecord(t - t[0], q, g * u, h, source,
                       {**names, "force": f"gain*{names['actuation']}"},
                       one_based=one_based, reference_m=ref, constants=constants)
+    mapped = {n for r, n in names.items() if r in vals or r == "gain"}
+    unused = sorted(k for k in table.raw if k not in mapped and k not in EMPS_CONSTANTS
+                    and not k.startswith("__"))
     extras = {"actuation": u, "unit": unit_a, "gain": g, "gain_from": g_from,
-              "disturbance": vals.get("disturbance")}
+              "disturbance": vals.get("disturbance"), "unused": unused}
     return rec, extras
