@@ -123,7 +123,7 @@ class DesignResult:
     """Why some corners were not run ("" when every planned corner ran)."""
     shortfalls: list[dict[str, str]] = field(default_factory=list)
     """The requirements the tuned controller misses on the fitted actuator
-    (``tune.spec.shortfalls``)."""
+    (``tune.shortfalls.shortfalls``)."""
 
     @property
     def verdict(self) -> str:
@@ -139,7 +139,7 @@ class DesignResult:
         """On a FAIL: one sentence naming the requirements no gains inside the bounds were
         found to meet, with the best value reached ("" otherwise; ``tune.spec.
         blocking_summary``)."""
-        from ema_cli.tune.spec import blocking_summary
+        from ema_cli.tune.shortfalls import blocking_summary
 
         return blocking_summary(self.shortfalls) if self.verdict == "FAIL" else ""
 

@@ -104,8 +104,8 @@ class TuneResult:
     def shortfalls(self, verdicts: Any = None) -> list[dict[str, str]]:
         """With a spec: the requirements the tuned controller misses by the battery's rows
         ``verdicts`` (default: the check's), each with the value, the best the search
-        reached, why and the limit that would pass (``tune.spec.shortfalls``); else []."""
-        from ema_cli.tune.spec import shortfalls
+        reached, why and the limit that would pass (``tune.shortfalls.shortfalls``); else []."""
+        from ema_cli.tune.shortfalls import shortfalls
 
         o = self.outcome
         if o.spec is None:
@@ -114,10 +114,9 @@ class TuneResult:
                           else verdicts)
 
     def unmeetable(self) -> str:
-        """With a spec and a FAIL of the tuned controller: one sentence naming the
-        requirements no gains inside the bounds were found to meet, with the best value
-        reached (``tune.spec.blocking_summary``); else ""."""
-        from ema_cli.tune.spec import blocking_summary
+        """With a spec and a FAIL: the sentence naming the requirements no gains inside the
+        bounds were found to meet (``tune.shortfalls.blocking_summary``); else ""."""
+        from ema_cli.tune.shortfalls import blocking_summary
 
         return blocking_summary(self.shortfalls()) if self.outcome.verdict == "FAIL" else ""
 
@@ -129,7 +128,7 @@ class TuneResult:
         import pandas as pd
 
         from ema_cli.acceptance.verdict import overall
-        from ema_cli.tune.spec import fmt_range, fmt_value
+        from ema_cli.tune.shortfalls import fmt_range, fmt_value
         from ema_cli.units import from_si
 
         o = self.outcome

@@ -11,7 +11,7 @@ from ema_cli.cli.common import console
 
 
 def print_shortfalls(rows: Sequence[dict[str, str]], title: str) -> None:
-    """A table of the requirements not met (``tune.spec.shortfalls``) and one line of what
+    """A table of the requirements not met (``tune.shortfalls.shortfalls``) and one line of what
     to relax (nothing when every requirement is met)."""
     from ema_cli.cli.output import print_table
 

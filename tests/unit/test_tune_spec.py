@@ -152,7 +152,7 @@ def test_checked_candidates_are_distinct_and_best_first():
 
 
 def test_the_unmeetable_requirements_are_summarised_fixed_first():
-    from ema_cli.tune.spec import blocking_summary
+    from ema_cli.tune.shortfalls import blocking_summary
 
     rows = [{"requirement": "rate: rate", "limit": ">= 700 deg/s", "reached": "321.1 deg/s",
              "best": "321.3 deg/s", "tier": "search", "blocking": True},
