@@ -18,7 +18,7 @@ from pathlib import Path
 from ema_cli.config.loader import load_config
 from ema_cli.config.tune import TuneConfig
 from ema_cli.tune.problem import build_scenarios
-from ema_cli.tune.run import run_tuning
+from ema_cli.tune.run import min_budget, run_tuning
 
 REPEATS = 3
 ROOT = Path(__file__).resolve().parent.parent
@@ -36,7 +36,8 @@ def main() -> int:
     threads = os.environ.get("NUMBA_NUM_THREADS", "all")
     print(f"\n== ema tune configs/tune.yaml (numba threads: {threads}; median of "
           f"{args.repeats} after a warm-up)")
-    run_tuning(cfg, scenarios, budget=2 * cfg.optimiser.pop)  # warm-up: load the kernels
+    o = cfg.optimiser  # warm-up (load the kernels): the smallest budget it accepts
+    run_tuning(cfg, scenarios, budget=min_budget(o.method, o.pop, len(cfg.variables), o.polish))
     walls, outs = [], []
     for _ in range(args.repeats):
         t0 = time.perf_counter()

@@ -113,15 +113,20 @@ def _interval(duration: float, dt: float, samples: int) -> float:
 
 
 # ------------------------------------------------------------------------------- the tests
+RECORD_SAMPLES = 10000  # recorded samples of a step or no-load-rate run (its figure) [-]
+
+
 def run_step(name: str, test: StepTest, units: Sequence[Mapping[str, float]],
-             dt: float) -> list[TestRun]:
+             dt: float, samples: int = RECORD_SAMPLES) -> list[TestRun]:
+    """``samples``: recorded samples per run (the metrics come from the kernel at every step
+    whatever it is; only a rise-time bound reads the recorded load angle)."""
     from ema_cli.sim.signals import InputSignal
 
     duration = _whole(test.duration_s, dt)
     out = []
     for _, res in _simulate(units, [InputSignal(kind="step",
                                                 amplitude=test.amplitude_deg * DEG)],
-                            dt, duration, _interval(duration, dt, 10000)):
+                            dt, duration, _interval(duration, dt, samples)):
         out += [_step_case(name, test, res, c, duration) for c in range(len(res.P))]
     return out
 
@@ -164,12 +169,15 @@ def _step_case(name: str, test: StepTest, res: Any, c: int, duration: float) -> 
 
 
 def run_margins(name: str, test: MarginsTest, units: Sequence[Mapping[str, float]],
-                dt: float) -> list[TestRun]:
-    """The linear limit's margins of each unit (no simulation: ``dt`` unused)."""
-    return [_margins(name, test, p) for p in units]
+                dt: float, figure: bool = True) -> list[TestRun]:
+    """The linear limit's margins of each unit (no simulation: ``dt`` unused); ``figure``
+    False leaves out the loop transfer functions the figure draws (the measurements are the
+    same)."""
+    return [_margins(name, test, p, figure) for p in units]
 
 
-def _margins(name: str, test: MarginsTest, params: Mapping[str, float]) -> TestRun:
+def _margins(name: str, test: MarginsTest, params: Mapping[str, float],
+             figure: bool = True) -> TestRun:
     from ema_cli.analysis.linear import loop_transfer, margins
     from ema_cli.config.acceptance import MARGINS_F_MIN_HZ
 
@@ -181,7 +189,8 @@ def _margins(name: str, test: MarginsTest, params: Mapping[str, float]) -> TestR
     for loop in test.loops:
         m = margins(params, loop, f_min=MARGINS_F_MIN_HZ, f_max=f_top)
         res[loop] = m
-        loops[loop] = loop_transfer(params, loop, f)
+        if figure:
+            loops[loop] = loop_transfer(params, loop, f)
         L_top, L_below, L_bottom = (abs(complex(x)) for x in loop_transfer(
             params, loop, np.array([f_top, f_top / 1.01, MARGINS_F_MIN_HZ])))
         # above f_top, |L| is taken to keep falling if it falls at f_top (strictly proper)
@@ -284,7 +293,9 @@ def _threshold_case(name: str, test: ThresholdTest, tried: dict[float, float], l
 
 
 def run_no_load_rate(name: str, test: NoLoadRateTest, units: Sequence[Mapping[str, float]],
-                     dt: float) -> list[TestRun]:
+                     dt: float, samples: int = RECORD_SAMPLES) -> list[TestRun]:
+    """``samples``: recorded samples per run (the peak rate is the kernel's, at every step;
+    the recorded rate only tells whether the load still accelerated at the end)."""
     from ema_cli.sim.signals import InputSignal
 
     duration = _whole(test.duration_s, dt)
@@ -292,7 +303,7 @@ def run_no_load_rate(name: str, test: NoLoadRateTest, units: Sequence[Mapping[st
     out = []
     for _, res in _simulate(units, [InputSignal(kind="step",
                                                 amplitude=test.amplitude_deg * DEG)],
-                            dt, duration, _interval(duration, dt, 10000)):
+                            dt, duration, _interval(duration, dt, samples)):
         for c in range(len(res.P)):
             rate = res.metrics[c, MET["peak_load_rate"]]
             w = np.abs(res.signal("omega_load", c))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +19,7 @@ if TYPE_CHECKING:
     from ema_cli.tune.run import TuneOutcome
 
 RECORD_DT_S = 1.0e-4  # interval of the recorded before/after signals [s]
+BOUND_SHARE = 0.01  # a tuned variable this close to a bound (share of its range) is flagged [-]
 CONTROLLERS = ("reference", "before", "after")
 """The three controllers the report compares: the default controller (no scenario
 compensators), the start (scenario compensators, variables at the actuator's values) and the
@@ -61,6 +61,98 @@ class TuneResult:
     @property
     def title(self) -> str:
         return f"{self.config.name}: tuning ({self.outcome.method_label})"
+
+    @property
+    def verdict(self) -> str | None:
+        """With a spec: the battery's verdict on the tuned controller (PASS, FAIL,
+        INCONCLUSIVE); None without one."""
+        return self.outcome.verdict
+
+    @property
+    def exit_code(self) -> int:
+        """``ema tune``'s exit code: 0, or with a spec 0 PASS, 1 FAIL, 3 INCONCLUSIVE."""
+        from ema_cli.acceptance.verdict import EXIT_CODES
+
+        return 0 if self.verdict is None else EXIT_CODES[self.verdict]
+
+    def on_bounds(self, share: float = BOUND_SHARE) -> list[dict[str, Any]]:
+        """The tuned variables within ``share`` of their range (on their scale) from a bound:
+        ``variable``, ``side`` (lower/upper), ``value``, ``bound``, ``hard`` (the bound is the
+        end of the parameter's own range, e.g. fb_motor's [0, 1]) and ``text``, one line."""
+        from ema_cli.config.tune import FRACTIONS
+        from ema_cli.model.params import BY_NAME
+        from ema_cli.units import fmt_num
+
+        out = []
+        for v, x in self.tuned.items():
+            spec = self.config.variables[v]
+            u = spec.to_unit(x)
+            side = "lower" if u <= share else "upper" if u >= 1.0 - share else None
+            if side is None:
+                continue
+            bound = spec.bounds[0 if side == "lower" else 1]
+            hard = v in FRACTIONS and bound in (0.0, 1.0)
+            unit = BY_NAME[v].unit if v in BY_NAME else ""
+            where = "on" if x == bound else f"within {100 * share:g} % of its range from"
+            text = (f"{v} = {fmt_num(x, unit, 4)} is {where} its {side} bound "
+                    f"{fmt_num(bound, unit, 4)}" + (
+                        f", the end of {v}'s own range" if hard else
+                        f": the best may lie beyond it (widen variables.{v}.bounds)"))
+            out.append({"variable": v, "side": side, "value": x, "bound": bound,
+                        "hard": hard, "text": text})
+        return out
+
+    def shortfalls(self, verdicts: Any = None) -> list[dict[str, str]]:
+        """With a spec: the requirements the tuned controller misses by the battery's rows
+        ``verdicts`` (default: the check's), each with the value, the best the search
+        reached, why and the limit that would pass (``tune.shortfalls.shortfalls``); else []."""
+        from ema_cli.tune.shortfalls import shortfalls
+
+        o = self.outcome
+        if o.spec is None:
+            return []
+        return shortfalls(o.spec, o.checked[o.chosen]["verdicts"] if verdicts is None
+                          else verdicts)
+
+    def unmeetable(self) -> str:
+        """With a spec and a FAIL: the sentence naming the requirements no gains inside the
+        bounds were found to meet (``tune.shortfalls.blocking_summary``); else ""."""
+        from ema_cli.tune.shortfalls import blocking_summary
+
+        return blocking_summary(self.shortfalls()) if self.outcome.verdict == "FAIL" else ""
+
+    def requirements_frame(self) -> pd.DataFrame:
+        """With a spec (else empty): one row per requirement (a test's metric): the limit, the
+        search's tightened limit, the tier, the tuned controller's value and result by the
+        battery, what the search saw (controllers measured, how many met the limit, the best
+        value and the range) and why a requirement left the search."""
+        import pandas as pd
+
+        from ema_cli.acceptance.verdict import overall
+        from ema_cli.tune.shortfalls import fmt_range, fmt_value
+        from ema_cli.units import from_si
+
+        o = self.outcome
+        if o.spec is None:
+            return pd.DataFrame()
+        pick = o.checked[o.chosen]
+        rows = []
+        for r in o.spec.requirements:
+            value, cond, _, _ = pick["readings"][r.key]
+            res = overall([v.result for v in pick["verdicts"]
+                           if v.test == r.test and v.metric == r.metric])
+            t = o.spec.tallies[r.key]
+            lo_t, hi_t = (from_si(b, r.unit) for b in (r.lo_t, r.hi_t))
+            rows.append({
+                "test": r.test, "metric": r.metric, "limit": r.limit_text,
+                "search_min": lo_t, "search_max": hi_t, "unit": r.unit, "tier": r.tier,
+                "measured_in_search": r.proxy or ("battery" if r.tier == "search" else ""),
+                "tuned": from_si(value, r.unit), "tuned_condition": cond, "result": res,
+                "seen": t.seen, "met": t.met,
+                "best": fmt_value(r, t.best) if t.seen else "",
+                "range": fmt_range(r, t.low, t.high) if t.seen and t.high >= t.low else "",
+                "out_of_reach": o.spec.unreachable.get(r.key, "")})
+        return pd.DataFrame(rows)
 
     def evaluation(self, which: str) -> Any:
         if which not in CONTROLLERS:
@@ -229,20 +321,25 @@ class TuneResult:
 
 
 def _inputs(cfg: TuneConfig, pairs: list[tuple[str, Any]], method: str | None,
-            runs: int | None, budget: int | None) -> Any:
+            runs: int | None, budget: int | None, spec: ConfigSource = None) -> Any:
     """The marker's inputs of a tuning: the resolved config, the effective --method, --runs
-    and --budget (the config's when not given), the --set paths."""
+    and --budget (the config's when not given), the --set paths, the spec (its SHA-256 when
+    a file, its leaves when a document)."""
     from ema_cli.report.run_inputs import run_inputs
 
     o = cfg.optimiser
+    spec_file = spec if isinstance(spec, str | Path) else None
+    spec_doc = spec if spec is not None and spec_file is None else None
     return run_inputs(cfg, sets=pairs, options={"method": method or o.method,
                                                 "runs": runs or o.runs,
-                                                "budget": budget or o.budget})
+                                                "budget": budget or o.budget},
+                      files={"spec": spec_file} if spec_file is not None else None,
+                      parts={"spec": spec_doc} if spec_doc is not None else None)
 
 
 def tune_inputs(config: ConfigSource, overrides: Overrides = None, *,
                 method: str | None = None, runs: int | None = None,
-                budget: int | None = None) -> Any:
+                budget: int | None = None, spec: ConfigSource = None) -> Any:
     """The inputs (``report.run_inputs.RunInputs``) a :func:`tune` with these arguments
     records in its folder's marker: what ``ema tune`` checks ``--out`` against before it
     tunes."""
@@ -250,23 +347,30 @@ def tune_inputs(config: ConfigSource, overrides: Overrides = None, *,
     from ema_cli.config.tune import TuneConfig
 
     pairs = override_pairs(overrides)
-    return _inputs(load_config(config, pairs, TuneConfig), pairs, method, runs, budget)
+    return _inputs(load_config(config, pairs, TuneConfig), pairs, method, runs, budget, spec)
 
 
 def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
-         runs: int | None = None, budget: int | None = None,
+         runs: int | None = None, budget: int | None = None, spec: ConfigSource = None,
          progress: Callable[[int, int, int], None] | None = None,
          log: Callable[[str], None] | None = None, backend: str | None = None,
          n_jobs: int | None = None, scheduler: str | None = None) -> TuneResult:
     """Tune the controller of ``config`` (a tuning config: YAML file, dict or
     :class:`~ema_cli.config.tune.TuneConfig`); ``method`` (ga|de), ``runs`` (seeds) and
     ``budget`` (candidate evaluations per run) override the config's optimiser section.
-    ``progress(run, done, total)`` is called after each generation; ``log(text)`` once before
-    the run with how the budget becomes whole generations (:func:`tune.run.explain_budget`).
-    ``backend`` (threads, loky, dask; None: this process's threads), ``n_jobs`` and
-    ``scheduler`` say where each generation's candidates run (``sweep.executor``; the same
-    bits on every backend). Raises EmaError when no
-    candidate meets every constraint (nothing is written then)."""
+    ``spec`` (an acceptance spec: YAML file, dict or ``AcceptanceSpec``): its tests run on
+    the tuning's actuator and its limits become requirements of the search (``tune/spec.py``);
+    the tuned controller is the one the whole battery ranks best among the search's best, and
+    :attr:`TuneResult.verdict` is the battery's verdict on it.
+    ``progress(run, done, total)`` is called after each generation with the evaluations done
+    and planned in that run; ``log(text)`` once before the run with how the budget becomes
+    whole generations (:func:`tune.run.explain_budget`). A budget that cannot pay for two
+    generations is refused before anything is logged. ``backend`` (threads, loky, dask; None:
+    this process's threads), ``n_jobs`` and ``scheduler`` say where each generation's
+    candidates run (``sweep.executor``; the same bits on every backend). Raises EmaError when
+    no candidate meets
+    the tuning config's own constraints (nothing is written then); a spec's requirements
+    that are not met are a result (the verdict FAIL), not an error."""
     from ema_cli.config.loader import load_config
     from ema_cli.config.tune import MAX_BUDGET, MAX_RUNS, TuneConfig
     from ema_cli.tune.problem import build_scenarios
@@ -289,11 +393,16 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     n_jobs = backend_args(backend, n_jobs, scheduler)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, TuneConfig)
+    from ema_cli.tune.run import check_budget
+
+    o = cfg.optimiser
+    check_budget(method or o.method, budget or o.budget, o.pop, len(cfg.variables), o.polish,
+                 "--budget" if budget is not None else "optimiser.budget")
     scenarios, actuator_doc = build_scenarios(cfg, base_dir(config))
+    requirements = spec_requirements(spec, cfg, base_dir(config))
     from ema_cli.limits import check_steps
     from ema_cli.tune.run import evaluations_for
 
-    o = cfg.optimiser
     n_evals = (runs or o.runs) * evaluations_for(method or o.method, budget or o.budget, o.pop,
                                                  len(cfg.variables), o.polish, o.local)
     steps = cfg.simulation.duration_s / cfg.simulation.dt_s
@@ -320,49 +429,48 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
     from ema_cli.sweep.executor import executing
 
     with executing(backend, n_jobs, scheduler) as ex:
-        outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S)
+        outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S,
+                             requirements)
     outcome.actuator_document = actuator_doc
     res = TuneResult(cfg, outcome, str(config) if isinstance(config, str | Path) else "dict",
-                     pairs, _inputs(cfg, pairs, method, runs, budget), ex.describe())
-    if not outcome.feasible:
+                     pairs, _inputs(cfg, pairs, method, runs, budget, spec), ex.describe())
+    if not outcome.own_feasible:
+        from ema_cli.api.tune_messages import infeasible_message
+
         raise EmaError(infeasible_message(res))
     return res
 
 
-def infeasible_message(res: TuneResult) -> str:
-    """One line: no candidate met every constraint, and which the best one violates most (the
-    largest violation relative to its limit, as the tuning scores it; NaN counts as the
-    largest)."""
-    ev = res.outcome.after
-    worst = ""
-    df = res.constraints_frame()
-    bad = df[~df["met"]]
-    if len(bad):
-        r = bad.loc[relative_violation(bad).idxmax()]
-        bound = f"<= {r['max']:g}" if r["max"] is not None and not math.isnan(
-            r["max"]) else f">= {r['min']:g}"
-        worst = (f"; the best violates scenarios.{r['scenario']} {r['constraint']} "
-                 f"{r['after']:.4g} {r['unit']} (limit {bound} {r['unit']})")
-    elif ev.diverged.any():
-        worst = "; the best diverges"
-    return (f"no candidate met every constraint in {int(res.outcome.timings['evaluations'])} "
-            f"evaluations{worst}: relax the constraints, widen the bounds or raise budget "
-            "(infeasible constraints)")
+def spec_requirements(spec: ConfigSource, cfg: TuneConfig, folder: Path | None) -> Any:
+    """The requirements (``tune.spec.SpecRequirements``) of acceptance spec ``spec`` on the
+    tuning's actuator (None without a spec); bad specs raise EmaError naming ``spec``."""
+    if spec is None:
+        return None
+    from ema_cli.config.acceptance import AcceptanceSpec
+    from ema_cli.config.loader import load_config
+    from ema_cli.tune.spec import SpecRequirements
+
+    if isinstance(spec, str | Path) and not Path(spec).is_file():
+        raise EmaError(f"spec '{spec}' is not a file (an acceptance spec, e.g. "
+                       "configs/acceptance.yaml)")
+    try:
+        sp = load_config(spec, [], AcceptanceSpec)
+        return SpecRequirements.build(sp, spec_label(spec), cfg.actuator, folder,
+                                      list(cfg.variables), cfg.requirements.margin)
+    except EmaError as exc:
+        raise EmaError(f"spec: {exc.message}", exc.exit_code) from None
 
 
-def relative_violation(df: pd.DataFrame) -> pd.Series:
-    """Per row of :meth:`TuneResult.constraints_frame`: how far the tuned value lies outside
-    its limit, relative to the limit (``(v - max)/|max|``, ``(min - v)/|min|``; inf for NaN)."""
-    import numpy as np
+def spec_label(spec: ConfigSource) -> str:
+    """How reports name a spec: a path as given, relative to the project when inside it (no
+    machine path), or ``dict``."""
+    if not isinstance(spec, str | Path):
+        return "dict"
+    p = Path(spec)
+    root = Path(__file__).resolve().parents[2]
+    try:
+        return p.resolve().relative_to(root).as_posix() if p.is_absolute() else str(p)
+    except ValueError:
+        return p.name
 
-    def one(r: Any) -> float:
-        v = r["after"]
-        if v != v:  # NaN: not measured, the worst
-            return math.inf
-        out = 0.0
-        for bound, sign in ((r["max"], 1.0), (r["min"], -1.0)):
-            if bound is not None and bound == bound:
-                out += max(sign * (v - bound), 0.0) / (abs(bound) or 1.0)
-        return out
 
-    return df.apply(one, axis=1).astype(np.float64)

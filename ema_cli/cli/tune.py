@@ -38,6 +38,11 @@ def tune_cmd(
     budget: Annotated[int | None, typer.Option(
         "--budget", help="Candidate evaluations per run, each running every scenario "
                          "(default: the config's optimiser.budget).")] = None,
+    spec: Annotated[Path | None, typer.Option(
+        "--spec", help="Acceptance spec whose tests run on the tuned actuator and whose "
+                       "limits become requirements of the search (with the config's "
+                       "requirements.margin); exit 0/1/3 by the battery's verdict on the "
+                       "tuned controller.")] = None,
     set_: Annotated[list[str] | None, typer.Option(
         "--set", help="Override a config value by dotted path, e.g. "
                       "variables.Kpp.bounds=[20,100] or optimiser.seed=3; repeatable.")] = None,
@@ -59,41 +64,56 @@ def tune_cmd(
     if not config.is_file():
         raise EmaError(f"config '{config}' is not a file (a tuning config, e.g. "
                        "configs/tune.yaml)")
+    if spec is not None and not spec.is_file():
+        raise EmaError(f"--spec '{spec}' is not a file (an acceptance spec, e.g. "
+                       "configs/acceptance.yaml)")
     pairs = parse_assignments(set_, "--set")
     n_jobs = backend_options(backend, n_jobs, scheduler)
     if out is not None:  # its inputs against the folder's, before the tuning
         from ema_cli.api.tune import tune_inputs
 
         check_output(out, "tune", as_options(
-            lambda: tune_inputs(config, pairs, method=method, runs=runs, budget=budget),
-            method="--method", runs="--runs", budget="--budget"))
+            lambda: tune_inputs(config, pairs, method=method, runs=runs, budget=budget,
+                                spec=spec),
+            method="--method", runs="--runs", budget="--budget", spec="--spec"))
     from ema_cli.progress import report
 
     def progress(run: int, done: int, total: int) -> None:
-        report(f"run {run + 1}: evaluations", done, total)
+        report(f"run {run + 1}: evaluations", done, total)  # both counts of that run
 
     res = as_options(lambda: tune(config, pairs, method=method, runs=runs, budget=budget,
-                                  progress=progress,
+                                  spec=spec, progress=progress,
                                   log=lambda text: err_console.print(text, highlight=False),
                                   backend=backend, n_jobs=n_jobs, scheduler=scheduler),
-                     method="--method", runs="--runs", budget="--budget", **BACKEND_OPTIONS)
+                     method="--method", runs="--runs", budget="--budget", spec="--spec",
+                     **BACKEND_OPTIONS)
     print_retries(res.execution)
     report_stage("writing files and figures")
     folder = res.save(out)
     o = res.outcome
     console.print(f"[bold]{res.title}[/]")
     ref, before, after = (float(e.cost[0]) for e in (o.reference, o.before, o.after))
+    met = ("every constraint met" if o.feasible else
+           "the config's constraints met; not every requirement of the spec")
     console.print(f"cost (relative, no unit): default controller {ref:.4g}, before tuning "
                   f"{before:.4g}, tuned {after:.4g} ({100 * (1 - after / ref):.1f} % lower); "
-                  "every constraint met", highlight=False)
+                  f"{met}", highlight=False)
     from ema_cli.model.params import BY_NAME
     from ema_cli.units import fmt_num
 
     console.print("tuned: " + ", ".join(
         f"{k} = {fmt_num(v, BY_NAME[k].unit if k in BY_NAME else '', 5)}"
         for k, v in res.tuned.items()), highlight=False)
+    for flag in res.on_bounds():
+        console.print(f"on a bound: {flag['text']}", highlight=False)
     if len(o.runs) > 1:
         console.print(f"{len(o.runs)} runs: costs within {100 * o.cost_spread:.2f} %",
                       highlight=False)
+    if res.verdict is not None:
+        from ema_cli.cli.requirements import print_requirements
+
+        print_requirements(res)
     console.print(f"{int(o.timings['evaluations'])} evaluations in {o.wall_s:.1f} s -> "
                   f"{folder}", highlight=False)
+    if res.exit_code:
+        raise typer.Exit(res.exit_code)

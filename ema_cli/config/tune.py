@@ -71,6 +71,9 @@ MAX_POP = 10_000  # population, at most [-]
 DEFAULT_BUDGET = 960  # candidate evaluations per run (pop 24 x 40 generations + elites) [-]
 DEFAULT_POP = 24  # population [-]
 DEFAULT_POLISH = 0.33  # share of the budget for the local search after the global one [-]
+DEFAULT_SPEC_MARGIN = 0.05  # share of each acceptance limit held back in the search [-]
+DEFAULT_SPEC_CHECK = 8  # best distinct controllers of the search run through the battery [-]
+DEFAULT_SPEC_SCREEN = 32  # Sobol controllers measured before the search [-]
 
 
 def _at(key: str, message: str) -> ValueError:
@@ -199,7 +202,9 @@ class OptimiserConfig(Strict):
                           "evolution (a cross-check at the same budget)")
     budget: PositiveInt = Field(DEFAULT_BUDGET, le=MAX_BUDGET,
                                 description="candidate evaluations per run (each runs every "
-                                            "scenario)")
+                                            "scenario); its global share must pay for two "
+                                            "generations (checked before the run: "
+                                            "tune.run.check_budget)")
     pop: PositiveInt = Field(DEFAULT_POP, ge=6, le=MAX_POP, description="population")
     runs: PositiveInt = Field(1, le=MAX_RUNS, description="independent runs (seeds seed, "
                                                           "seed+1, ...); the best is kept")
@@ -215,12 +220,25 @@ class OptimiserConfig(Strict):
     patience: NonNegInt = Field(
         0, description="GA: stop after this many generations without improvement (0: never)")
 
-    @model_validator(mode="after")
-    def _enough(self) -> OptimiserConfig:
-        if self.budget < 2 * self.pop:
-            raise ValueError(f"budget ({self.budget}) must cover at least two generations of "
-                             f"the population ({self.pop}): >= {2 * self.pop}")
-        return self
+
+class RequirementsConfig(Strict):
+    """How an acceptance spec given to the tuning (``ema tune --spec``, ``ema design``) becomes
+    its requirements (``tune/spec.py``, docs/tuning.md)."""
+
+    margin: float = Field(
+        DEFAULT_SPEC_MARGIN, ge=0.0, le=0.5,
+        description="share of each limit held back in the search (a maximum M becomes "
+                    "M - margin*|M|, a minimum m becomes m + margin*|m|); the sign-off uses the "
+                    "spec's own limits [-]")
+    check: PositiveInt = Field(
+        DEFAULT_SPEC_CHECK, le=64,
+        description="the best distinct controllers of the search that run the whole battery "
+                    "after it; the tuned controller is the best of them by the battery")
+    screen: PositiveInt = Field(
+        DEFAULT_SPEC_SCREEN, le=4096,
+        description="controllers sampled across the bounds (Sobol) before the search: a "
+                    "requirement none of them meets and that barely moves is out of the "
+                    "controller's reach")
 
 
 class TuneConfig(Strict):
@@ -238,6 +256,9 @@ class TuneConfig(Strict):
         description="name -> limit (min/max with unit) or off; defaults: gain_margin >= 6 dB, "
                     "phase_margin >= 45 deg")
     optimiser: OptimiserConfig = Field(default_factory=OptimiserConfig)
+    requirements: RequirementsConfig = Field(
+        default_factory=RequirementsConfig,
+        description="with an acceptance spec (--spec): its limits as requirements")
 
     @field_validator("variables")
     @classmethod

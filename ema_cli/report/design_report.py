@@ -12,7 +12,8 @@ from ema_cli.report.rundir import manifest, write_json, write_text
 VERDICT_MEANING = {
     "PASS": "the tuned controller meets every limit of the spec on the fitted actuator and on "
             "every corner of the identified 95 % intervals",
-    "FAIL": "at least one case (the fitted actuator or an interval corner) misses a limit",
+    "FAIL": "at least one case (the fitted actuator or an interval corner) misses a limit of "
+            "the spec the controller was tuned against",
     "INCONCLUSIVE": "the identification cannot carry a sign-off, whatever the batteries say",
 }
 
@@ -23,13 +24,20 @@ def design_markdown(js: dict[str, Any]) -> str:
     v = js["verdict"]
     lines = [f"# ema design: {js['log']}", "", f"**Verdict: {v}** (exit code {js['exit_code']}):"
              f" {VERDICT_MEANING[v]}."]
+    word = "" if v == "INCONCLUSIVE" else "not measured (beside the verdict): "
     for why in js["inconclusive_because"]:
-        lines.append(f"- {why}")
+        lines.append(f"- {word}{why}")
     acc = js["acceptance"]
     cases = acc["cases"]
     n_pass = sum(c["passed"] for c in cases)
+    cor = acc["corners"]
     lines += ["", f"Acceptance ({acc['spec']}): {n_pass} of {len(cases)} cases pass "
-              f"(the fitted actuator and {len(cases) - 1} interval corners)."]
+              f"(the fitted actuator and {cor['run']} of {cor['planned']} interval corners"
+              + (f"; {cor['not_run_because']}" if cor["not_run_because"] else "") + ")."]
+    blocking = js["requirements"]["unmeetable"]
+    if blocking:
+        lines += ["", f"**{blocking[0].upper() + blocking[1:]}.**"]
+    lines += _shortfalls_markdown(js)
     ident = js["identification"]
     lines += ["", "## Identified actuator", "",
               "| parameter | value | 95 % interval | unit | determined | truth |",
@@ -55,7 +63,14 @@ def design_markdown(js: dict[str, Any]) -> str:
     for g, after in tr["gains_after"].items():
         lines.append(f"| {g} | {md_cell(tr['gains_before'][g], 5)} | {md_cell(after, 5)} |")
     lines.append(f"| cost | {md_cell(tr['cost_before'], 5)} | {md_cell(tr['cost_after'], 5)} |")
-    lines += ["", "Details: tune/tuning.md; the tuned actuator: tune/tuned.yaml.", "",
+    lines += [""] + [f"- On a bound: {f}" for f in tr["on_bounds"]]
+    req = js["requirements"]
+    lines += ["", f"Tuned against the spec: its tests run inside the search on the fitted "
+              f"actuator, its limits tightened by {100 * req['margin']:g} % as constraints "
+              "(tune/tuning.md, section 'Requirements of the spec', and "
+              "tune/requirements.csv: every requirement, what the search reached, the "
+              "battery's check of its best controllers).",
+              "", "Details: tune/tuning.md; the tuned actuator: tune/tuned.yaml.", "",
               "## Acceptance: cases x tests", ""]
     names = list(ident["parameters"])
     head = ["case", *names, *acc["tests"], "verdict"]
@@ -79,6 +94,26 @@ def design_markdown(js: dict[str, Any]) -> str:
     t = js["timings_s"]
     lines += ["", "Wall time: " + ", ".join(f"{k} {v:.1f} s" for k, v in t.items()) + ".", ""]
     return "\n".join(lines)
+
+
+def _shortfalls_markdown(js: dict[str, Any]) -> list[str]:
+    """The requirements the tuned controller misses on the fitted actuator: value, best in
+    the search, why, the limit that would pass (none when every one is met)."""
+    rows = js["requirements"]["unmet"]
+    if not rows:
+        return []
+    lines = ["", "## Requirements the tuned controller misses on the fitted actuator", "",
+             "| requirement | limit | tuned | best in the search | why | would pass |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append("| " + " | ".join(md_cell(x) for x in (
+            r["requirement"], r["limit"], r["value"], r["best"] or "-", r["why"],
+            r["relax"] or "-")) + " |")
+    relax = [f"{r['requirement']} {r['relax']}" for r in rows if r["relax"]]
+    if relax:
+        lines += ["", "To pass with the tuned controller on the fitted actuator, relax: "
+                  + "; ".join(relax) + " (or change the actuator)."]
+    return lines
 
 
 def write_design(folder: Path, result: Any) -> list[str]:

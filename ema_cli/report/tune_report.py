@@ -127,6 +127,7 @@ def tuning_markdown(res: Any, figures: list[str]) -> str:
         spec = cfg.variables[v]
         lines.append(f"| {v} | {res.initial[v]:.6g} | {x:.6g} | "
                      f"[{spec.bounds[0]:g}, {spec.bounds[1]:g}] | {spec.scale} |")
+    lines += bounds_markdown(res)
     lines += ["", "`tuned.yaml` is the actuator with these values (`ema simulate tuned.yaml`); "
               "`scenarios/NAME.yaml` (tuned), `scenarios/NAME.before.yaml` and "
               "`scenarios/NAME.default.yaml` are each scenario with the three controllers, "
@@ -136,9 +137,61 @@ def tuning_markdown(res: Any, figures: list[str]) -> str:
               md_table(res.constraints_frame()), "",
               "Always: no scenario may diverge and the closed linear loop must be stable. "
               "Margins are those of the linearised loops (position and speed, the smaller).",
-              "", "## Runs", "", md_table(res.runs_frame()), "", "## Figures", ""]
+              "", "## Runs", "", md_table(res.runs_frame()), ""]
+    lines += spec_markdown(res)
+    lines += ["## Figures", ""]
     lines += [f"![{f}]({f})" for f in figures]
     return "\n".join(lines) + "\n"
+
+
+def bounds_markdown(res: Any) -> list[str]:
+    """The tuned variables on (within 1 % of) a bound, one item each (none: nothing)."""
+    flags = res.on_bounds()
+    if not flags:
+        return []
+    return ["", "**On a bound** (within 1 % of the range, on the variable's scale):", ""] + [
+        f"- {f['text']}" for f in flags]
+
+
+def spec_markdown(res: Any) -> list[str]:
+    """The spec's section of tuning.md: its requirements, how the search saw them, the
+    battery's verdict on the tuned controller and on the checked candidates (none without a
+    spec)."""
+    o = res.outcome
+    sp = o.spec
+    if sp is None:
+        return []
+    margin = 100 * sp.margin
+    pick = o.checked[o.chosen]
+    lines = ["## Requirements of the spec", "",
+             f"Spec `{sp.source}` ({len(sp.spec.tests)} tests) with the tuned controller: "
+             f"**{pick['verdict']}** by the battery (`ema acceptance`'s own code)."
+             + (f" **{res.unmeetable()[0].upper()}{res.unmeetable()[1:]}.**"
+                if res.unmeetable() else ""), "",
+             f"- In the search (tier `search`), each requirement's limit is tightened by "
+             f"{margin:g} % of its value (the search's min/max columns); the sign-off uses the "
+             "spec's own. Tier `fixed`: the controller plays no part (motor locked), measured "
+             "once. Tier `check`: measured by the whole battery on the "
+             f"{len(o.checked)} best distinct controllers of the search after it; the tuned "
+             f"controller is the best of them by the battery's numbers"
+             + (f" (checked controller {1 + o.chosen}: the battery ranked the search's own "
+                "best lower)" if o.chosen else " (the search's own best)") + ".",
+             f"- Screening: {sp.screened} controllers across the bounds (the start and "
+             "Sobol points) measured the search tier before the search."]
+    if sp.unreachable:
+        lines.append("- Out of the controller's reach (left the search's constraints): "
+                     + "; ".join(f"{k} {why}" for k, why in sp.unreachable.items()) + ".")
+    agree = [sum(c["search_met"][r.key] == (c["readings"][r.key][3] == 0.0)
+                 for c in o.checked) for r in sp.by_tier("search")]
+    if agree:
+        lines.append(f"- The search's measurements (the battery's code, the threshold's proxy) "
+                     f"agreed with the battery on met/not met for {sum(agree)} of "
+                     f"{len(agree) * len(o.checked)} (requirement, checked controller) pairs.")
+    lines += ["", md_table(res.requirements_frame()), "",
+              "Checked controllers (search's best first): " + ", ".join(
+                  f"{k + 1}: {c['verdict']} (cost {c['cost']:.4g})"
+                  for k, c in enumerate(o.checked)) + ".", ""]
+    return lines
 
 
 def write_tuning(folder: Path, config_yaml: str, res: Any) -> None:
@@ -160,6 +213,8 @@ def write_tuning(folder: Path, config_yaml: str, res: Any) -> None:
     write_csv(folder / "runs.csv", res.runs_frame(), float_format="%.9g")
     write_csv(folder / "scenarios.csv", res.scenarios_frame(), float_format="%.9g")
     write_csv(folder / "constraints.csv", res.constraints_frame(), float_format="%.9g")
+    if res.outcome.spec is not None:
+        write_csv(folder / "requirements.csv", res.requirements_frame(), float_format="%.9g")
     write_figure(folder / "convergence.png", convergence_figure(res))
     figures = ["convergence.png"]
     for s, sc in enumerate(res.outcome.problem.scenarios):
@@ -172,5 +227,6 @@ def write_tuning(folder: Path, config_yaml: str, res: Any) -> None:
         "tune", outputs=list(OUTPUT_FILES) + figures[1:], method=o.method,
         seeds=[r.seed for r in o.runs], budget=o.runs[0].result.evaluations,
         cost=float(o.after.cost[0]), feasible=o.feasible, tuned=res.tuned,
+        verdict=res.verdict, on_bounds=[f["variable"] for f in res.on_bounds()],
         wall_time_s=o.wall_s, timings=o.timings, source=res.source,
         overrides=[[k, v] for k, v in res.overrides], execution=res.execution))

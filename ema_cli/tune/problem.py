@@ -41,6 +41,7 @@ from ema_cli.sim.tables import MET
 
 INFEASIBLE = 1.0e12  # score offset of an infeasible candidate (costs are far below) [-]
 VIOLATION_CAP = 1.0e6  # largest counted violation of one constraint [-]
+OWN_FIRST = 1.0e10  # with a spec: the config's own violation outranks any spec violation [-]
 COST_METRIC = {"itae": "itae_pos", "iae": "iae_pos", "ise": "ise_pos"}
 SIM_CONSTRAINTS = {"overshoot": "overshoot", "peak_current": "peak_current",
                    "peak_voltage": "peak_voltage", "settling_time": "settling_time",
@@ -82,10 +83,20 @@ class Evaluation:
     cost: np.ndarray
     score: np.ndarray
     batch: BatchResult | None = field(default=None, repr=False)
+    own_violation: np.ndarray | None = None
+    """The tuning config's own constraints' share of ``violation`` (None: no spec)."""
+    spec: dict[str, Any] | None = field(default=None, repr=False)
+    """With a spec: requirement key -> ``tune.spec.Reading`` of these candidates."""
 
     @property
     def feasible(self) -> np.ndarray:
         return self.violation == 0.0
+
+    @property
+    def own_feasible(self) -> np.ndarray:
+        """Whether the tuning config's own constraints are met (a spec's requirements aside)."""
+        own = self.violation if self.own_violation is None else self.own_violation
+        return own == 0.0
 
 
 def scenario_document(cfg: TuneConfig, name: str, actuator: Mapping[str, Any],
@@ -189,16 +200,33 @@ def _violation(value: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return np.where(np.isnan(v), VIOLATION_CAP, np.minimum(v, VIOLATION_CAP))
 
 
+def spec_scores(own: np.ndarray, spec: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    """Scores with a spec's requirements, feasibility first in two ranks: a candidate that
+    misses the tuning config's own constraints (violation ``own``) scores below every one
+    that meets them (:data:`OWN_FIRST` more), whatever the spec's violation ``spec``; among
+    those, the smaller spec violation wins; a candidate meeting both scores its ``cost``. The
+    config's constraints define the problem; the spec may hold limits no gains can meet, and
+    the search then still returns a controller that meets the config's, nearest the spec."""
+    own, spec, cost = (np.asarray(a, dtype=np.float64) for a in (own, spec, cost))
+    score = np.where(own > 0, INFEASIBLE + OWN_FIRST + own,
+                     np.where(spec > 0, INFEASIBLE + spec, cost))
+    return np.where(np.isfinite(score), score, INFEASIBLE + 10 * OWN_FIRST)
+
+
 class TuneProblem:
     """Bounds ``[0, 1]^n_var`` (the unit cube of the variables) and a batched ``evaluate``.
 
-    ``progress(done, total)`` is called after each batch with the candidate evaluations done
-    so far and ``budget`` (if given).
+    ``progress(done)`` is called after each batch with the candidate evaluations done so far.
+    ``requirements`` (``tune.spec.SpecRequirements``, from an acceptance spec): their search
+    tier is measured for every candidate and its violation joins the constraints'. Every
+    candidate the optimisers evaluate is kept in ``archive`` (unit-cube points and scores).
     """
 
     def __init__(self, cfg: TuneConfig, scenarios: Sequence[Scenario],
-                 parallel: bool = True) -> None:
+                 parallel: bool = True, requirements: Any = None) -> None:
         self.cfg = cfg
+        self.requirements = requirements
+        self.archive: list[tuple[np.ndarray, np.ndarray]] = []
         self.scenarios = list(scenarios)
         self.variables = list(cfg.variables)
         self.specs = [cfg.variables[v] for v in self.variables]
@@ -330,14 +358,24 @@ class TuneProblem:
             for name, (lo, hi) in lims.items():
                 violation += _violation(values[name][:, s], lo, hi)
         violation += VIOLATION_CAP * (diverged.sum(axis=1) + unstable.sum(axis=1))
-        score = np.where(violation > 0, INFEASIBLE + violation, cost)
-        score = np.where(np.isfinite(score), score, INFEASIBLE + VIOLATION_CAP * 10)
+        own, readings = None, None
+        if self.requirements is None:
+            score = np.where(violation > 0, INFEASIBLE + violation, cost)
+            score = np.where(np.isfinite(score), score, INFEASIBLE + VIOLATION_CAP * 10)
+        else:
+            own, readings = violation, self.requirements.measure(X)
+            violation = own + self.requirements.violation(readings, n)
+            score = spec_scores(own, violation - own, cost)
         return Evaluation(X, metric, ratio, values, self.limits, diverged, violation, cost,
-                          score, res if dec > 0 else None)
+                          score, res if dec > 0 else None, own, readings)
 
     def evaluate(self, U: np.ndarray) -> np.ndarray:
         """Scores of unit-cube candidates ``U[n, n_var]`` (the optimisers' interface)."""
+        U = np.atleast_2d(U)
         ev = self.score(self.values(U))
+        self.archive.append((np.clip(U, 0.0, 1.0).copy(), ev.score.copy()))
+        if self.requirements is not None and ev.spec is not None:
+            self.requirements.record(ev.spec)
         self.n_evaluations += U.shape[0]
         if self.progress is not None:
             self.progress(self.n_evaluations)

@@ -21,9 +21,10 @@ ROOT = Path(__file__).resolve().parents[2]
 LOG = str(ROOT / "experiments" / "logs" / "design_hc_1pct.csv")
 CI_SPEC = str(ROOT / "configs" / "acceptance_geared.yaml")
 runner = CliRunner()
-# the smallest loop: 1 s of the log, 2 starts, a 2-generation tuning, two cheap tests
+# the smallest loop: 1 s of the log, 2 starts, a 2-generation tuning (21: the smallest
+# budget whose GA share pays for 8 + 6), the compact spec
 TINY = ["--set", "identify.window=[0,1]", "--set", "identify.shooting.starts=2",
-        "--set", "tune.optimiser.pop=8", "--budget", "16", "--spec", CI_SPEC]
+        "--set", "tune.optimiser.pop=8", "--budget", "21", "--spec", CI_SPEC]
 
 
 def invoke(*args: str):
@@ -97,6 +98,61 @@ def test_verdict_rules():
     assert EXIT_CODES == {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3}
 
 
+class _Battery:
+    """A stand-in for an acceptance result: only its verdict matters to the corner policy."""
+
+    def __init__(self, verdict):
+        self.verdict = verdict
+        self.passed = verdict == "PASS"
+
+
+CASES = [("nominal", {}, {})] + [(f"corner-{k:02d}", {}, {"kL": "low"}) for k in range(1, 5)]
+
+
+@pytest.mark.parametrize("verdicts, doubts, policy, ran, why", [
+    # a FAIL of the nominal case: no corner can turn it back
+    (["FAIL"] * 5, [], "auto", 1, "4 interval corners not run: nominal FAILs"),
+    # the corners run until one FAILs
+    (["PASS", "PASS", "FAIL", "PASS", "PASS"], [], "auto", 3,
+     "2 interval corners not run: corner-02 FAILs"),
+    # every corner runs while each passes, or is INCONCLUSIVE (a FAIL would still outrank it)
+    (["PASS", "INCONCLUSIVE", "PASS", "PASS", "PASS"], [], "auto", 5, ""),
+    # a fit that cannot carry a sign-off: INCONCLUSIVE whatever the corners say
+    (["PASS"] * 5, ["not confirmed"], "auto", 1, "the fit cannot carry a sign-off"),
+    (["FAIL"] * 5, [], "all", 5, ""),
+])
+def test_corners_run_only_while_they_can_change_the_verdict(monkeypatch, verdicts, doubts,
+                                                             policy, ran, why):
+    import importlib
+
+    import ema_cli.api.design as d
+
+    acc = importlib.import_module("ema_cli.api.acceptance")  # the module (api/ exports the
+    given = iter(verdicts)                                  # function of the same name)
+    monkeypatch.setattr(acc, "acceptance", lambda doc: _Battery(next(given)))
+    spec = {"name": "s", "tests": {}}
+    cases, skipped = d._sign_off(CASES, spec, {}, {}, "log.csv", doubts, policy, [],
+                                 lambda _: None)
+    assert [c.name for c in cases] == [n for n, _, _ in CASES[:ran]]
+    assert why in skipped and bool(skipped) == bool(why)
+    # the verdict the cases run give is the one all cases would give
+    assert d.design_verdict(doubts, [c.verdict for c in cases]) == d.design_verdict(
+        doubts, verdicts if not doubts else verdicts[:1])
+
+
+def test_repeated_outcomes_are_named_once():
+    from ema_cli.api.design import actuator_name, case_list
+
+    corners_ = [f"corner-{k:02d}" for k in range(1, 17)]
+    assert case_list(["nominal", *corners_], 17) == "all 17 cases"
+    assert case_list(["nominal", *corners_[:5]], 17) == "nominal and 5 corners"
+    assert case_list(corners_[:2], 17) == "corner-01, corner-02"
+    assert case_list(["nominal"], 1) == "nominal"
+    # the fitted actuator titles the figures by the log's name, a folder-safe one
+    assert actuator_name("experiments/logs/design_hc_1pct.csv") == "design_hc_1pct-fitted"
+    assert actuator_name("a b(1).csv", "corner-03") == "a-b-1-fitted-corner-03"
+
+
 def test_tune_document_on_the_fitted_actuator():
     from ema_cli.config.loader import read_yaml
 
@@ -127,7 +183,8 @@ def test_end_to_end_tiny_and_inconclusive(tmp_path, monkeypatch):
     monkeypatch.setattr(d, "fit_doubts", lambda fit: [
         *real(fit), "the identification's optimum is not confirmed: forced by the test"])
     out = tmp_path / "d"
-    r = runner.invoke(app, ["design", LOG, *TINY, "--out", str(out)], catch_exceptions=False)
+    r = runner.invoke(app, ["design", LOG, *TINY, "--corners", "all", "--out", str(out)],
+                      catch_exceptions=False)
     assert r.exit_code == 3, r.output
     js = json.loads((out / "design.json").read_text())
     assert js["verdict"] == "INCONCLUSIVE" and js["exit_code"] == 3
@@ -163,3 +220,39 @@ def test_end_to_end_tiny_and_inconclusive(tmp_path, monkeypatch):
     # the report (from the verdict line on) fits 80 columns; progress lines come before it
     tail = r.output[r.output.index("INCONCLUSIVE: ema design"):]
     assert all(len(ln) <= 80 for ln in tail.splitlines()), tail
+
+
+@pytest.mark.slow
+def test_the_readme_design_line_ends_in_an_answer(tmp_path, monkeypatch):
+    """README's Use section: `ema design experiments/logs/design_hc_1pct.csv`, defaults. It
+    must end PASS, or FAIL naming the requirement no gains inside the bounds meet with the
+    best value reached. The bundled spec's load deflection (motor locked, +-20 N*m) <= 0.05
+    deg cannot hold on this log's actuator: the lost motion alone, twice the identified half
+    backlash alpha (2.5 mrad: 0.286 deg, independent of any controller), exceeds it."""
+    monkeypatch.chdir(ROOT)  # the README's relative path
+    out = tmp_path / "d"
+    r = runner.invoke(app, ["design", "experiments/logs/design_hc_1pct.csv", "--out",
+                            str(out)], catch_exceptions=False)
+    assert r.exit_code in (0, 1), r.output
+    js = json.loads((out / "design.json").read_text())
+    if js["verdict"] == "PASS":
+        return
+    alpha = js["identification"]["parameters"]["alpha"]["value"]
+    assert math.degrees(2 * alpha) > 0.05  # the closed form: the spec's limit cannot hold
+    unmet = {row["requirement"]: row for row in js["requirements"]["unmet"]}
+    ld = unmet["load-deflection: free_play"]
+    assert ld["blocking"] and ld["tier"] == "fixed"
+    value_deg = float(ld["value"].split()[0])
+    assert value_deg >= math.degrees(2 * alpha) * 0.99  # at least the gap (1 % slack)
+    # the answer is the console's last words before the closing line, and design.md's first
+    text = " ".join(r.output.split())
+    assert ("no gains can meet load-deflection: free_play <= 0.05 deg "
+            f"({ld['reached']} whatever the gains)") in text
+    assert "no PASS without relaxing these limits" in text
+    assert text.index("no gains can meet") > text.index("interval corners not run")
+    md = (out / "design.md").read_text()
+    assert "**No gains can meet load-deflection: free_play" in md
+    assert str(ROOT) not in md and "/tmp" not in md  # no machine path
+    # no corner ran after the nominal FAIL, and the reason is said once
+    assert js["acceptance"]["corners"]["run"] == 0
+    assert r.output.count("interval corners not run") == 1

@@ -131,7 +131,7 @@ CASES = [
           "manifest.json"],
          lambda w: (write(w, "spec.yaml", SPEC), write(w, "tol.yaml", TOLERANCES))),
     Case("design", ["design", "mk/closed_loop.csv", "design.yaml", "--tune-config",
-                    "tune.yaml", "--spec", "spec.yaml", "--budget", "16"],
+                    "tune.yaml", "--spec", "spec.yaml", "--budget", "21"],
          ["design.md", "design.json", "identification/identification.json",
           "tune/tuned.yaml", "acceptance/nominal/acceptance.csv", "manifest.json"],
          design_setup, instants=6),

@@ -34,7 +34,10 @@ def test_every_kind_is_complete(name):
         assert kind.metrics[metric] == SI_UNIT[dim]
         assert all(UNITS[u][0] == dim for u in units_of(dim))
     # runner, batched over units: (name, test, units, dt) -> list[TestRun]
-    assert list(inspect.signature(kind.runner).parameters) == ["name", "test", "units", "dt"]
+    # (further parameters, e.g. the tuning's fewer recorded samples, only with defaults)
+    params = list(inspect.signature(kind.runner).parameters.values())
+    assert [p.name for p in params[:4]] == ["name", "test", "units", "dt"]
+    assert all(p.default is not inspect.Parameter.empty for p in params[4:])
     # figure: a function of report/acceptance_report.py taking (run, test, title)
     fig = getattr(acceptance_report, kind.figure, None)
     assert callable(fig), kind.figure

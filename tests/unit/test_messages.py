@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from ema_cli.api import identify_closed_loop, simulate
-from ema_cli.api.tune import infeasible_message, relative_violation
+from ema_cli.api.tune_messages import infeasible_message, relative_violation
 from ema_cli.cli.main import app
 from ema_cli.errors import EmaError
 
