@@ -39,7 +39,7 @@ from ema_cli.config.base import (
 )
 from ema_cli.config.run import KEY_MARK, Scalar
 from ema_cli.errors import EmaError
-from ema_cli.units import SI_UNIT, UNITS, units_of
+from ema_cli.units import SI_UNIT, UNITS, to_si, units_of
 
 MAX_TESTS = 50  # tests in one spec, at most [-]
 MAX_DURATION_S = 120.0  # simulated duration of one test run, at most [s]
@@ -80,10 +80,9 @@ class Limit(Strict):
         return UNITS[self.unit][0]
 
     def si(self) -> tuple[float, float]:
-        """(lower, upper) bounds in SI (-inf/inf where not given)."""
-        f = UNITS[self.unit][1]
-        return (-math.inf if self.min is None else self.min * f,
-                math.inf if self.max is None else self.max * f)
+        """(lower, upper) bounds in SI (-inf/inf where not given; degC -> K)."""
+        return (-math.inf if self.min is None else to_si(self.min, self.unit),
+                math.inf if self.max is None else to_si(self.max, self.unit))
 
 
 def _at(key: str, message: str) -> ValueError:

@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ema_cli.model import drive, plant
+from ema_cli.model import drive, plant, thermal
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,10 @@ class State:
     hold: tuple[str, ...] = ()
     """Conditions (names bound like ``rate``'s arguments) under which the state is held: its rate
     is then 0 (the locked motor, a rigid axis's motor, a site that sticks)."""
+    present: str = ""
+    """A structural flag (``model.actuator.FLAGS``) without which the state is absent from a
+    variant: its rate is not computed, RK4 and the store leave it alone (an element that is off
+    costs the kernel nothing). Empty: in every variant."""
 
 
 STATES: tuple[State, ...] = (
@@ -57,6 +61,10 @@ STATES: tuple[State, ...] = (
     State("f_amp", "N*m", "amplifier output (force or torque on the axis, load side)",
           rate=drive.amplifier_rate_nb, side="load"),
     State("z_L", "rad", "LuGre bristle deflection at the load", kind="exact", side="load"),
+    State("th_w", "K", "winding temperature rise above ambient (thermal element)",
+          rate=thermal.winding_rate_nb, present="thermal"),
+    State("th_h", "K", "housing temperature rise above ambient (thermal element)",
+          rate=thermal.housing_rate_nb, present="thermal"),
 )
 STATE_INDEX: dict[str, int] = {s.name: k for k, s in enumerate(STATES)}
 N_STATES = len(STATES)

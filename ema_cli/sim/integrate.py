@@ -25,7 +25,7 @@ from ema_cli.model.actuator import (
 )
 from ema_cli.model.friction import holds_nb
 from ema_cli.sim import layout
-from ema_cli.sim.layout import rk4_combine, rk4_stage, variant_rates
+from ema_cli.sim.layout import variant_combine, variant_rates, variant_stage
 
 MAX_EVENTS = 8  # friction switches located in one step at most (more: the rest in its mode)
 EVENT_ITERATIONS = 60  # regula-falsi iterations locating one switch at most [-]
@@ -61,13 +61,13 @@ def rk4(x, h, ra, rb, rc, la, lb, lc, ea, eb, ec, lp, fl, uh, disc, xn2, tfh, tf
     -> the state at its end (the non-rk4 states unchanged)."""
     k1 = _stage_rates(x, ra, la, ea, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m,
                       dir_m, stuck_l, dir_l, hw, variant)
-    k2 = _stage_rates(rk4_stage(x, 0.5 * h, k1), rb, lb, eb, lp, fl, uh, disc, xn2, tfh, tf_b,
-                      visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
-    k3 = _stage_rates(rk4_stage(x, 0.5 * h, k2), rb, lb, eb, lp, fl, uh, disc, xn2, tfh, tf_b,
-                      visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
-    k4 = _stage_rates(rk4_stage(x, h, k3), rc, lc, ec, lp, fl, uh, disc, xn2, tfh, tf_b, visc,
-                      tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
-    return rk4_combine(x, h / 6.0, k1, k2, k3, k4)
+    k2 = _stage_rates(variant_stage(x, 0.5 * h, k1, variant), rb, lb, eb, lp, fl, uh, disc, xn2,
+                      tfh, tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
+    k3 = _stage_rates(variant_stage(x, 0.5 * h, k2, variant), rb, lb, eb, lp, fl, uh, disc, xn2,
+                      tfh, tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
+    k4 = _stage_rates(variant_stage(x, h, k3, variant), rc, lc, ec, lp, fl, uh, disc, xn2, tfh,
+                      tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
+    return variant_combine(x, h / 6.0, k1, k2, k3, k4, variant)
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")

@@ -59,6 +59,12 @@ DERIVED: tuple[tuple[str, str], ...] = (
     ("t_const", "T_load - offset: the constant external torque on the load"),
     ("inv_amp_tau", "1/amp_tau"),
     ("a_vf", "the discrete cascade's velocity filter coefficient"),
+    ("th_r0", "thermal: R at ambient, R*(1 + alpha_cu*(T_amb - T_ref))"),
+    ("th_ra", "thermal: R*alpha_cu (R = th_r0 + th_ra*th_w)"),
+    ("th_gwh", "thermal: 1/Rth_wh"),
+    ("th_gha", "thermal: 1/Rth_ha"),
+    ("th_icw", "thermal: 1/Cth_w"),
+    ("th_ich", "thermal: 1/Cth_h"),
 )
 """Constants derived once per lane from its parameters (``sim.kernel._init`` computes them)."""
 BOOL_DERIVED = ("contact", "is_step")
@@ -203,6 +209,12 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
         fl_values = dict(zip(actuator.FLAGS, actuator.flags_nb.py_func(int(variant)),
                              strict=True))
     st_names = [s.name for s in states]
+    absent = {s.name for s in states
+              if s.present and fl_values is not None and not fl_values[s.present]}
+    stored = [(k, n) for k, n in enumerate(st_names) if n not in absent]
+
+    def rk4(s: Any) -> bool:  # integrated by RK4 in this variant
+        return s.kind == "rk4" and s.name not in absent
     lines = [
         f"S_PARAM, S_DERIVED, S_MEMORY = {START['param']}, {START['derived']}, "
         f"{START['memory']}",
@@ -216,7 +228,8 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
         "    return " + _rows_tuple("X", st_names, "S_STATE"),
         "",
         "def store_x(W, j, x):",
-        *(f"    W[S_STATE + {k}, j] = x.{n}" for k, n in enumerate(st_names)),
+        *(f"    W[S_STATE + {k}, j] = x.{n}" for k, n in stored),
+        *(["    pass"] if not stored else []),
         "",
         "def load_mem(W, j):",
         "    return " + _rows_tuple("Mem", [m for m, _ in MEMORY], "S_MEMORY"),
@@ -246,12 +259,12 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
         fields = ", ".join("v" if o.name == s.name else f"x.{o.name}" for o in states)
         lines += [f"def set_{s.name}(x, v):", f"    return X({fields})", ""]
     # RK4: a stage's state, and the step's combination, over the rk4 states (the others kept)
-    stage = ", ".join(f"x.{s.name} + hh * k.{s.name}" if s.kind == "rk4" else f"x.{s.name}"
+    stage = ", ".join(f"x.{s.name} + hh * k.{s.name}" if rk4(s) else f"x.{s.name}"
                       for s in states)
     lines += ["def rk4_stage(x, hh, k):", f"    return X({stage})", ""]
     comb = ", ".join(
         f"x.{s.name} + h6 * (k1.{s.name} + 2.0 * k2.{s.name} + 2.0 * k3.{s.name} + k4.{s.name})"
-        if s.kind == "rk4" else f"x.{s.name}" for s in states)
+        if rk4(s) else f"x.{s.name}" for s in states)
     lines += ["def rk4_combine(x, h6, k1, k2, k3, k4):", f"    return X({comb})", ""]
     # the state equations, their arguments bound by name
     # (a structural flag is read from the variant, a compile-time constant, before the
@@ -260,7 +273,7 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
               "prm": LANE_FIELDS}
     calls = {}
     for s in states:
-        if s.kind != "rk4":
+        if not rk4(s):
             continue
         args = list(inspect.signature(s.rate.py_func if hasattr(s.rate, "py_func")
                                       else s.rate).parameters)
@@ -325,8 +338,10 @@ def build(states: tuple = STATES) -> dict[str, Any]:
     return out
 
 
-def _rates_for(variant: int | None, states: tuple = STATES) -> Any:
-    """The compiled state equations of ``variant`` (None: of any variant), generated once."""
+def _rates_for(variant: int | None, states: tuple = STATES, name: str = "rates") -> Any:
+    """The compiled ``name`` of ``variant`` (None: of any variant), generated once: its state
+    equations (``rates``), RK4 stage and combination (``rk4_stage``, ``rk4_combine``, without
+    the states absent from it) or the store of its state (``store_x``)."""
     key = (variant, states)
     if key not in _RATES:
         import numpy as np
@@ -338,11 +353,21 @@ def _rates_for(variant: int | None, states: tuple = STATES) -> Any:
                 ns[f"_rate_{s.name}"] = s.rate
         code = source(states, variant)
         exec(compile(code, f"<ema_cli.sim.layout: variant {variant}>", "exec"), ns)  # noqa: S102
-        _RATES[key] = njit(forceinline=True, error_model="numpy")(ns["rates"])
-    return _RATES[key]
+        jit = njit(forceinline=True, error_model="numpy")
+        _RATES[key] = {n: jit(ns[n]) for n in ("rates", "rk4_stage", "rk4_combine", "store_x")}
+    return _RATES[key][name]
 
 
-_RATES: dict[tuple[int | None, tuple], Any] = {}
+_RATES: dict[tuple[int | None, tuple], dict[str, Any]] = {}
+
+
+def _literal(variant: Any) -> int | None:
+    from numba.core import types
+
+    return variant.literal_value if isinstance(variant, types.IntegerLiteral) else None
+
+
+_OL = {"forceinline": True, "fastmath": {"contract"}, "error_model": "numpy"}
 
 
 def variant_rates(x: Any, alg: Any, prm: Any, variant: int) -> Any:
@@ -351,17 +376,56 @@ def variant_rates(x: Any, alg: Any, prm: Any, variant: int) -> Any:
     return _rates_for(int(variant))(x, alg, prm, actuator.flags_nb(variant))
 
 
-@overload(variant_rates, prefer_literal=True,
-          jit_options={"forceinline": True, "fastmath": {"contract"}, "error_model": "numpy"})
+@overload(variant_rates, prefer_literal=True, jit_options=_OL)
 def _variant_rates_ol(x, alg, prm, variant):  # noqa: ANN001, ANN202 (numba's overload API)
-    from numba.core import types
-
-    code = variant.literal_value if isinstance(variant, types.IntegerLiteral) else None
-    fn = _rates_for(code)
+    fn = _rates_for(_literal(variant))
     flags = actuator.flags_nb
 
     def impl(x, alg, prm, variant):  # noqa: ANN001, ANN202 (numba's overload)
         return fn(x, alg, prm, flags(variant))
+    return impl
+
+
+def variant_stage(x: Any, hh: float, k: Any, variant: int) -> Any:
+    """An RK4 stage's state ``x + hh*k`` over the states ``variant`` integrates."""
+    return _rates_for(int(variant), name="rk4_stage")(x, hh, k)
+
+
+@overload(variant_stage, prefer_literal=True, jit_options=_OL)
+def _variant_stage_ol(x, hh, k, variant):  # noqa: ANN001, ANN202 (numba's overload API)
+    fn = _rates_for(_literal(variant), name="rk4_stage")
+
+    def impl(x, hh, k, variant):  # noqa: ANN001, ANN202 (numba's overload)
+        return fn(x, hh, k)
+    return impl
+
+
+def variant_combine(x: Any, h6: float, k1: Any, k2: Any, k3: Any, k4: Any, variant: int) -> Any:
+    """RK4's combination ``x + h/6 (k1 + 2 k2 + 2 k3 + k4)`` over the states ``variant``
+    integrates (the others kept)."""
+    return _rates_for(int(variant), name="rk4_combine")(x, h6, k1, k2, k3, k4)
+
+
+@overload(variant_combine, prefer_literal=True, jit_options=_OL)
+def _variant_combine_ol(x, h6, k1, k2, k3, k4, variant):  # noqa: ANN001, ANN202 (numba's API)
+    fn = _rates_for(_literal(variant), name="rk4_combine")
+
+    def impl(x, h6, k1, k2, k3, k4, variant):  # noqa: ANN001, ANN202 (numba's overload)
+        return fn(x, h6, k1, k2, k3, k4)
+    return impl
+
+
+def variant_store_x(W: Any, j: int, x: Any, variant: int) -> None:
+    """Store the state of lane ``j`` (the states absent from ``variant`` left as they are)."""
+    _rates_for(int(variant), name="store_x")(W, j, x)
+
+
+@overload(variant_store_x, prefer_literal=True, jit_options=_OL)
+def _variant_store_ol(W, j, x, variant):  # noqa: ANN001, ANN202 (numba's overload API)
+    fn = _rates_for(_literal(variant), name="store_x")
+
+    def impl(W, j, x, variant):  # noqa: ANN001, ANN202 (numba's overload)
+        fn(W, j, x)
     return impl
 
 
@@ -390,3 +454,5 @@ set_z = _BUILT["set_z"]
 set_xI = _BUILT["set_xI"]
 set_f_amp = _BUILT["set_f_amp"]
 set_z_L = _BUILT["set_z_L"]
+set_th_w = _BUILT["set_th_w"]
+set_th_h = _BUILT["set_th_h"]
