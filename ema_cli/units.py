@@ -155,6 +155,8 @@ QUANTITY_UNITS: dict[str, dict[str, tuple[float, str]]] = {
                       "V*s/mm": (1e3, TRANSLATIONAL)},
     "position_gain_i": {"V/rad": (1.0, ROTARY), "V/m": (1.0, TRANSLATIONAL)},
     "ratio": {"-": (1.0, ROTARY), "rad/m": (1.0, TRANSLATIONAL)},
+    "acceleration": {"rad/s^2": (1.0, ROTARY), "deg/s^2": (DEG, ROTARY),
+                     "m/s^2": (1.0, TRANSLATIONAL), "mm/s^2": (1e-3, TRANSLATIONAL)},
 }
 """Units of the load-side quantities of an actuator description, by kind: unit -> (SI factor of
 the axis, the axis it belongs to). A value of the other axis's domain is refused."""
@@ -185,11 +187,12 @@ MOTOR_UNITS: dict[str, dict[str, float]] = {
 """Units of the motor-side and electrical quantities (always rotary or axis-free)."""
 AXIS_SI = {ROTARY: {"position": "rad", "velocity": "rad/s", "force": "N*m", "mass": "kg*m^2",
                     "stiffness": "N*m/rad", "damping": "N*m*s/rad", "gain": "N*m/V",
-                    "velocity_gain": "V*s/rad", "position_gain_i": "V/rad", "ratio": "-"},
+                    "velocity_gain": "V*s/rad", "position_gain_i": "V/rad", "ratio": "-",
+                    "acceleration": "rad/s^2"},
            TRANSLATIONAL: {"position": "m", "velocity": "m/s", "force": "N", "mass": "kg",
                            "stiffness": "N/m", "damping": "N*s/m", "gain": "N/V",
                            "velocity_gain": "V*s/m", "position_gain_i": "V/m",
-                           "ratio": "rad/m"}}
+                           "ratio": "rad/m", "acceleration": "m/s^2"}}
 """The SI unit of each load-side kind on each axis."""
 
 

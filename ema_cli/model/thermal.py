@@ -107,3 +107,35 @@ def time_constants(p: Mapping[str, float]) -> tuple[float, float]:
     disc = math.sqrt(max(tr * tr / 4.0 - det, 0.0))
     lam_fast, lam_slow = tr / 2.0 - disc, tr / 2.0 + disc
     return -1.0 / lam_fast, -1.0 / lam_slow
+
+
+@njit(cache=True, error_model="numpy")
+def flow_nb(a11, a12, a21, a22, b1, b2, h):
+    """The exact flow of ``dx/dt = A x + b`` over ``h`` [s] for a 2x2 ``A`` with real distinct
+    eigenvalues (every two-node network: ``a12*a21 > 0``) -> ``(E, f)`` as six numbers
+    ``e11, e12, e21, e22, f1, f2`` with ``x(h) = E x(0) + f``: ``E = expm(A h)``,
+    ``f = (integral_0^h expm(A s) ds) b``, from Sylvester's formula
+    ``F(A) = (F(l1) (A - l2 I) - F(l2) (A - l1 I)) / (l1 - l2)``. Caveat: the divided
+    difference loses digits when the two time constants nearly coincide (never for a winding
+    on a housing: their ratio is large)."""
+    disc = math.sqrt((a11 - a22) * (a11 - a22) + 4.0 * a12 * a21)
+    tr = a11 + a22
+    l1 = 0.5 * (tr + disc)
+    l2 = 0.5 * (tr - disc)
+    e1 = math.exp(l1 * h)
+    e2 = math.exp(l2 * h)
+    z1 = l1 * h
+    z2 = l2 * h
+    g1 = h * (math.expm1(z1) / z1 if z1 != 0.0 else 1.0)
+    g2 = h * (math.expm1(z2) / z2 if z2 != 0.0 else 1.0)
+    inv = 1.0 / disc
+    # F(A) = c1 (A - l2 I) - c2 (A - l1 I)
+    e11 = (e1 * (a11 - l2) - e2 * (a11 - l1)) * inv
+    e12 = (e1 - e2) * a12 * inv
+    e21 = (e1 - e2) * a21 * inv
+    e22 = (e1 * (a22 - l2) - e2 * (a22 - l1)) * inv
+    f11 = (g1 * (a11 - l2) - g2 * (a11 - l1)) * inv
+    f12 = (g1 - g2) * a12 * inv
+    f21 = (g1 - g2) * a21 * inv
+    f22 = (g1 * (a22 - l2) - g2 * (a22 - l1)) * inv
+    return e11, e12, e21, e22, f11 * b1 + f12 * b2, f21 * b1 + f22 * b2
