@@ -27,7 +27,7 @@ import math
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, PrivateAttr, field_validator, model_validator
 
 from ema_cli.config.base import (
     FiniteFloat,
@@ -337,11 +337,58 @@ class NoLoadRateTest(_Test):
         return [("duration_s", self.duration_s, MIN_STEPS)]
 
 
+DUTY_METRICS: dict[str, str] = {
+    "winding_temperature": "temperature", "housing_temperature": "temperature",
+    "time_above_limit": "time", "peak_current": "current", "rms_current": "current",
+    "peak_torque": "torque", "rms_torque": "torque", "envelope_use": "percent",
+    "l10_life": "time", "insulation_life_used": "percent", "energy": "energy"}
+"""A duty run's metrics and their dimensions (``config.duty``, ``duty.summary``): peak winding
+and housing temperature, time the winding spends above its limit, peak and RMS motor current
+and torque, the largest share of the drive's torque-speed envelope used, the screw's or gear's
+L10 life, the share of the insulation's life one pass consumes, the electrical energy drawn."""
+
+
+class DutyTest(_Test):
+    """A mission profile (``ema duty``) on the actuator under test: its winding temperature
+    and the other duty metrics against the test's limits (the profile's own actuator and
+    limits are not used)."""
+
+    METRICS: ClassVar[dict[str, str]] = DUTY_METRICS
+
+    test: Literal["duty"]
+    profile: str | dict[str, Any] = Field(
+        description="the profile: a YAML file relative to the spec, or the profile inline")
+    insulation: str = Field("F", description="insulation class (A E B F H N R) or its limit "
+                                             "('150 degC'): the 10 K rule counts from it")
+    _folder: Path | None = PrivateAttr(default=None)
+
+    def bind(self, folder: Path | None) -> None:
+        """The folder a relative ``profile`` is read from (the spec's)."""
+        self._folder = folder
+
+    def load_profile(self) -> Any:
+        """The validated profile (``config.duty.DutyProfile``); EmaError naming the key."""
+        from ema_cli.config.duty import DutyProfile
+        from ema_cli.config.loader import load_config
+
+        src: Any = self.profile
+        if isinstance(src, str):
+            path = (self._folder / src) if self._folder is not None else Path(src)
+            if not path.is_file():
+                raise EmaError(f"profile: '{src}' is not a file (a mission profile, relative "
+                               "to the spec)")
+            src = path
+        return load_config(src, (), DutyProfile)
+
+    def sim_seconds(self) -> float:
+        return self.load_profile().sim_seconds()
+
+
 _KINDS: dict[str, type[_Test]] = {
     "step": StepTest, "frequency_response": FrequencyResponseTest, "margins": MarginsTest,
           "threshold": ThresholdTest, "hysteresis": HysteresisTest,
           "load_deflection": LoadDeflectionTest, "dynamic_stiffness": DynamicStiffnessTest,
-          "no_load_rate": NoLoadRateTest}
+          "no_load_rate": NoLoadRateTest, "duty": DutyTest}
 
 
 METRICS: dict[str, dict[str, str]] = {k: dict(cls.METRICS) for k, cls in _KINDS.items()}

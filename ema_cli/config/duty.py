@@ -26,11 +26,12 @@ before anything runs, each error one line naming the key.
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from ema_cli.config.acceptance import ActuatorSpec, Limit
+from ema_cli.config.acceptance import DUTY_METRICS, ActuatorSpec, Limit
 from ema_cli.config.base import (
     FiniteFloat,
     PlainName,
@@ -48,15 +49,8 @@ MAX_REPEAT = 10**6  # repetitions of a block or of the profile [-]
 MAX_CYCLES = 10**9  # cycles of one sine block [-]
 KINDS = ("sine", "move", "dwell", "repeat")
 """The segment kinds."""
-METRICS: dict[str, str] = {
-    "winding_temperature": "temperature", "housing_temperature": "temperature",
-    "time_above_limit": "time", "peak_current": "current", "rms_current": "current",
-    "peak_torque": "torque", "rms_torque": "torque", "envelope_use": "percent",
-    "l10_life": "time", "insulation_life_used": "percent", "energy": "energy"}
-"""A duty run's metrics and their dimensions (``ema_cli.units.UNITS``): peak winding and
-housing temperature, time the winding spends above its limit, peak and RMS motor current and
-torque, the largest share of the drive's torque-speed envelope used, the screw's or gear's L10
-life, the share of the insulation's life one pass consumes, the electrical energy drawn."""
+METRICS = DUTY_METRICS
+"""A duty run's metrics and their dimensions (``config.acceptance.DUTY_METRICS``)."""
 
 
 def _at(key: str, message: str) -> ValueError:
@@ -256,12 +250,44 @@ class DutyProfile(Strict):
     def _limits(cls, v: dict[str, Limit]) -> dict[str, Limit]:
         return check_limits(v)
 
+    def sim_seconds(self) -> float:
+        """The simulated seconds of the segments' windows at two resistances, about (a move
+        counts its distance at its speed; ``duty.mechanics.window`` gives the exact ones) [s]:
+        what the step cap checks before anything runs."""
+        settle = self.simulation.settle_s
+        total = 0.0
+        for seg in self.segments:
+            subs = seg.segments if seg.kind == "repeat" else [seg]
+            period = sum(_rough_seconds(x) for x in subs)
+            count = seg.count if seg.kind == "repeat" else (
+                seg.cycles if seg.kind == "sine" else 1)
+            if seg.kind == "sine":
+                period = 1.0 / seg.frequency_hz
+            if seg.kind == "dwell":
+                total += min(seg.duration_s, settle + 0.2)
+                continue
+            n_s = max(1, math.ceil(settle / period - 1e-9)) if period > 0 else 1
+            total += period * min(count, n_s + 2)
+        return 2.0 * total
+
     @model_validator(mode="after")
     def _size(self) -> DutyProfile:
         n = sum(len(s.segments) if s.kind == "repeat" else 1 for s in self.segments)
         if n > MAX_SEGMENTS:
             raise _at("segments", f"{n} segments, more than {MAX_SEGMENTS}")
         return self
+
+
+def _rough_seconds(seg: Any) -> float:
+    """A segment's duration, a move's estimated by its distance over its speed when both are
+    fractions of the stroke (else 1 s) [s]."""
+    if seg.kind == "sine":
+        return seg.cycles / seg.frequency_hz
+    if seg.kind == "dwell":
+        return seg.duration_s
+    if isinstance(seg.to, int | float) and isinstance(seg.speed, int | float) and seg.speed:
+        return 2.0 * abs(seg.to) / abs(seg.speed) + 1.0
+    return 1.0
 
 
 def check_limits(v: dict[str, Limit]) -> dict[str, Limit]:

@@ -166,30 +166,41 @@ def _signal(b: Block, length: float, dt: float) -> object:
                        path=b.key)
 
 
-def simulate_blocks(exp: Expanded, units: Sequence[Mapping[str, float]], dt: float,
+def simulate_blocks(exps: Sequence[Expanded], units: Sequence[Mapping[str, float]], dt: float,
                     settle: float, limit_k: float, life_exp: float = 3.0,
                     progress: Callable[[str, int, int], None] | None = None
                     ) -> list[list[BlockRun]]:
-    """Every distinct block of ``exp`` on every actuator of ``units`` (SI parameters) ->
+    """Every distinct block of the profile on every actuator of ``units`` (SI parameters), the
+    profile expanded for each (``exps[u]``: the same motion, each unit's own ambient) ->
     ``runs[unit][block]``; ``limit_k`` the hot simulation's winding temperature [K];
     ``life_exp`` the exponent of the equivalent load (``sum |F|^p |v| dt``)."""
     from ema_cli.limits import check_steps
 
+    exp = exps[0]
+    if any(len(e.blocks) != len(exp.blocks) or any(
+            b.signature()[3:] != c.signature()[3:] or b.start != c.start
+            for b, c in zip(e.blocks, exp.blocks, strict=True)) for e in exps):
+        raise EmaError("duty: the units' profiles differ in more than their ambient")
     wins = [window(b, settle) for b in exp.blocks]
     two = [2 if p["drive"] == 0.0 else 1 for p in units]
     check_steps(sum(w.length for w in wins) / dt * sum(two), "the profile's block simulations",
                 "shorten the settling (simulation.settle_s) or raise simulation.dt_s")
+    from ema_cli.progress import report
+
     out: list[list[BlockRun]] = [[] for _ in units]
     for k, (b, w) in enumerate(zip(exp.blocks, wins, strict=True)):
+        report(f"segment {k + 1}/{len(exp.blocks)} {b.label}")
         if progress is not None:
-            progress(f"mechanics {k + 1}/{len(exp.blocks)} {b.label}", k, len(exp.blocks))
-        for u, run in enumerate(_block_runs(b, k, w, units, two, dt, limit_k, life_exp)):
+            progress(f"segment {k + 1}/{len(exp.blocks)} {b.label}", k, len(exp.blocks))
+        amb = [e.blocks[k].ambient_k for e in exps]
+        for u, run in enumerate(_block_runs(b, k, w, units, amb, two, dt, limit_k, life_exp)):
             out[u].append(run)
     return out
 
 
 def _block_runs(b: Block, k: int, w: Window, units: Sequence[Mapping[str, float]],
-                two: list[int], dt: float, limit_k: float, life_exp: float) -> list[BlockRun]:
+                ambients: list[float], two: list[int], dt: float, limit_k: float,
+                life_exp: float) -> list[BlockRun]:
     from ema_cli.model.params import to_row
     from ema_cli.model.thermal import resistance_nb
     from ema_cli.sim.runner import simulate_batch
@@ -201,7 +212,7 @@ def _block_runs(b: Block, k: int, w: Window, units: Sequence[Mapping[str, float]
     n_sig = max(SIG[s] for s in SIGNALS) + 1
     rows, owner = [], []
     for u, p in enumerate(units):
-        temps = (b.ambient_k, limit_k)
+        temps = (ambients[u], limit_k)
         for j in range(two[u]):
             r = resistance_nb.py_func(p["R"], p["alpha_cu"], temps[j], p["T_ref"])
             rows.append(to_row(_case_params(p, b, r)))
@@ -224,7 +235,7 @@ def _block_runs(b: Block, k: int, w: Window, units: Sequence[Mapping[str, float]
         if two[u] == 1:  # an amplifier: R does not enter the mechanics
             tr, cy = tr * 2, cy * 2
         run = BlockRun(k, tr, None if cy[0] is None else cy, w.n_rest,  # type: ignore[arg-type]
-                       (b.ambient_k, limit_k), div)
+                       (ambients[u], limit_k), div)
         if div:
             run.notes.append(f"{b.key}: the simulation diverged (check the actuator, or lower "
                              "simulation.dt_s)")

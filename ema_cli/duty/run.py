@@ -76,20 +76,14 @@ def run_units(prof: DutyProfile, units: Sequence[Mapping[str, float]], dt: float
             raise EmaError("duty: the actuator's drive gives no current (an amplifier without "
                            "drive.torque_constant): copper losses need it")
     t0 = time.perf_counter()
-    exp = expand(prof, axis, units[0]["T_amb"], dt)
-    ambients = {b.ambient_k for b in exp.blocks}
-    if len(units) > 1 and prof.ambient is None and any(
-            p["T_amb"] != units[0]["T_amb"] for p in units):
-        exp_by_unit = [expand(prof, axis, p["T_amb"], dt) for p in units]
-    else:
-        exp_by_unit = [exp] * len(units)
-    if any(e.blocks != exp.blocks for e in exp_by_unit):  # ambients differ: one batch each
-        runs_by_unit = [simulate_blocks(e, [p], dt, prof.simulation.settle_s, limits.winding_k,
-                                        prof.life.exponent, progress)[0]
-                        for e, p in zip(exp_by_unit, units, strict=True)]
-    else:
-        runs_by_unit = simulate_blocks(exp, units, dt, prof.simulation.settle_s,
-                                       limits.winding_k, prof.life.exponent, progress)
+    exps = [expand(prof, axis, p["T_amb"], dt) for p in units]
+    exp = exps[0]
+    notes = []
+    if prof.ambient is not None and len({p["T_amb"] for p in units}) > 1:
+        notes.append("the profile's ambient holds for every unit: their T_amb (a tolerance?) "
+                     "is not used; leave ambient out of the profile to use it")
+    runs_by_unit = simulate_blocks(exps, units, dt, prof.simulation.settle_s, limits.winding_k,
+                                   prof.life.exponent, progress)
     t_mech = time.perf_counter() - t0
     rating = None
     if prof.life.dynamic_load_rating is not None:
@@ -100,7 +94,7 @@ def run_units(prof: DutyProfile, units: Sequence[Mapping[str, float]], dt: float
         except ValueError as exc:
             raise EmaError(f"life.dynamic_load_rating: {exc}") from None
     out = []
-    for e, p, runs in zip(exp_by_unit, units, runs_by_unit, strict=True):
+    for e, p, runs in zip(exps, units, runs_by_unit, strict=True):
         t1 = time.perf_counter()
         net = Network.of(p)
         th = integrate(e, runs, net, limits.winding_k, limits.class_k)
@@ -110,7 +104,7 @@ def run_units(prof: DutyProfile, units: Sequence[Mapping[str, float]], dt: float
         meas = measurements(st, th, runs, e, limits.winding_k, limits.insulation_life_h)
         amb = e.blocks[e.order[0]].ambient_k
         run = DutyRun(dict(p), runs, th, st, meas, continuous_current(p, limits.winding_k, amb))
-        run.notes = [n for r in runs for n in r.notes]
+        run.notes = notes + [n for r in runs for n in r.notes]
         run.timings = {"mechanics_s": t_mech / len(units),
                        "thermal_s": time.perf_counter() - t1}
         if hot:
@@ -121,7 +115,7 @@ def run_units(prof: DutyProfile, units: Sequence[Mapping[str, float]], dt: float
             else:
                 from ema_cli.duty.hot import hot_check
 
-                run.hot = hot_check(p, min(ambients), th.peak_w, dt)
+                run.hot = hot_check(p, min(b.ambient_k for b in e.blocks), th.peak_w, dt)
             run.timings["hot_s"] = time.perf_counter() - t2
         out.append(run)
     return exp, out

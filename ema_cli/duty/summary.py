@@ -159,11 +159,20 @@ def current_margin(exp: Expanded, runs: Sequence[BlockRun], net: Network, limit_
     return math.sqrt(b)
 
 
+CONDITIONS = {"winding_temperature": "peak", "housing_temperature": "peak",
+              "time_above_limit": "winding", "peak_current": "peak", "rms_current": "RMS",
+              "peak_torque": "motor, peak", "rms_torque": "motor, RMS",
+              "envelope_use": "largest", "l10_life": "L10", "insulation_life_used": "per pass",
+              "energy": "per pass"}
+"""The condition each duty metric is shown with (``tvc: rms_current (RMS)``)."""
+
+
 def _meas(metric: str, value: float, dim: str, note: str = "", bound: tuple | None = None,
           reason: str = "") -> Measurement:
+    cond = CONDITIONS[metric]
     if bound is None:
-        return Measurement(metric, "", float(value), SI_UNIT[dim], note)
-    return Measurement(metric, "", float(value), SI_UNIT[dim], note, float(bound[0]),
+        return Measurement(metric, cond, float(value), SI_UNIT[dim], note)
+    return Measurement(metric, cond, float(value), SI_UNIT[dim], note, float(bound[0]),
                        float(bound[1]), reason)
 
 
