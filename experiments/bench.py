@@ -252,7 +252,7 @@ def sweep_bench() -> None:
 
 
 def main() -> int:
-    from ema_cli.identify.bench import bench_identify
+    from ema_cli.identify.torque.bench import bench_identify
 
     print(f"python {sys.version.split()[0]}, numpy {np.__version__}; medians of {REPEATS} repeats")
     kernel_throughput()

@@ -28,11 +28,11 @@ import time
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import CHANNELS, ClosedLoopLog
-from ema_cli.identify.closed_loop_fit import build_problem, polish, run_closed_loop
-from ema_cli.identify.friction_sweep import SWEEP_NAMES, SweepData, fit_friction_sweep
+from ema_cli.identify.closed_loop.ga_fit import build_problem, polish, run_closed_loop
+from ema_cli.identify.closed_loop.problem import CHANNELS, ClosedLoopLog
+from ema_cli.identify.friction.sweep import SWEEP_NAMES, SweepData, fit_friction_sweep
 from ema_cli.identify.log_settings import ClosedLoopSettings
-from ema_cli.identify.synthetic_logs import closed_loop_log, friction_sweep_log
+from ema_cli.identify.make_data import closed_loop_log, friction_sweep_log
 from ema_cli.units import DEG, RPM
 
 

@@ -52,8 +52,8 @@ def plan(manifest: dict, which: str) -> list[tuple[str, str, dict]]:
 
 def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None = None,
             tie: bool = True, command: str | None = None) -> dict:
-    from ema_cli.identify.closed_loop import load_log
-    from ema_cli.identify.closed_loop_fit import run_closed_loop
+    from ema_cli.identify.closed_loop.ga_fit import run_closed_loop
+    from ema_cli.identify.closed_loop.problem import load_log
     from ema_cli.identify.log_settings import ClosedLoopSettings
 
     log = load_log(path)

@@ -34,13 +34,13 @@ DRAWS = 20_000  # Monte Carlo draws of the Gaussian estimator per log
 
 def bounds(path: Path, plant: dict, truth: dict, lengths: list[float]) -> list[dict]:
     """The bound of one log: one row for the whole log, one per segment length."""
-    from ema_cli.identify.closed_loop import load_log
-    from ema_cli.identify.closed_loop_fit import build_problem
+    from ema_cli.identify.closed_loop.ga_fit import build_problem
+    from ema_cli.identify.closed_loop.problem import load_log
+    from ema_cli.identify.closed_loop.shooting_quality import channel_ratios
+    from ema_cli.identify.closed_loop.shooting_search import build
+    from ema_cli.identify.closed_loop.shooting_seat import start_states
+    from ema_cli.identify.closed_loop.whole_log import fd_jacobian
     from ema_cli.identify.log_settings import ClosedLoopSettings
-    from ema_cli.identify.shooting_quality import channel_ratios
-    from ema_cli.identify.shooting_search import build
-    from ema_cli.identify.shooting_seat import start_states
-    from ema_cli.identify.whole_log import fd_jacobian
 
     pb, _ = build_problem(ClosedLoopSettings(plant=plant), load_log(path))
     names, span = list(pb.names), pb.upper - pb.lower

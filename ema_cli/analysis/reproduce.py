@@ -28,7 +28,7 @@ from ema_cli.config.study import StudyConfig
 if TYPE_CHECKING:
     from ema_cli.config.sensitivity import SensitivityConfig
 from ema_cli.errors import EmaError
-from ema_cli.identify.settings import IdentifySettings
+from ema_cli.identify.torque.settings import IdentifySettings
 from ema_cli.model.nonlinearities import lookup
 
 

@@ -197,7 +197,7 @@ def primary_names(fit: Any) -> tuple[str, ...]:
     """The free parameters a sign-off rests on: all but the contact's nuisance parameters
     (``identify.closed_loop.NUISANCE``, freed by the fit unless stated), which stay at their
     estimates in every case (their intervals, often unbounded, are not corners)."""
-    from ema_cli.identify.closed_loop import NUISANCE
+    from ema_cli.identify.closed_loop.problem import NUISANCE
 
     skip = set(NUISANCE) if fit.shooting is not None and fit.settings.free_contact else set()
     return tuple(n for n in fit.names if n not in skip)
@@ -342,7 +342,7 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
     from ema_cli.config.acceptance import AcceptanceSpec
     from ema_cli.config.loader import dotted_pairs, load_config, read_yaml
     from ema_cli.config.tune import TuneConfig
-    from ema_cli.identify.closed_loop import MIN_POSITIVE
+    from ema_cli.identify.closed_loop.problem import MIN_POSITIVE
     from ema_cli.identify.log_settings import ClosedLoopSettings
     from ema_cli.report.log_identify_report import fitted_config
 

@@ -14,8 +14,8 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
-    from ema_cli.identify.run import IdentificationResult
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.identify.torque.run import IdentificationResult
+    from ema_cli.identify.torque.settings import IdentifySettings
 
 DATA_COLUMNS = {"t_s": "t", "dtheta_rad": "dth", "domega_rad_s": "dw", "torque_nm": "torque"}
 """Identification data columns (edge name -> IdentData field); ``torque_model_nm`` is the
@@ -24,7 +24,7 @@ model's torque at the best run's parameters."""
 
 @dataclass
 class Identification:
-    """An identification: ``result`` is ``identify.run.IdentificationResult`` (SI)."""
+    """An identification: ``result`` is ``identify.torque.run.IdentificationResult`` (SI)."""
 
     result: IdentificationResult
 
@@ -39,7 +39,7 @@ class Identification:
         least-squares optimum and its standard error, SI units in ``unit``."""
         import pandas as pd
 
-        from ema_cli.identify.problem import PARAM_UNITS
+        from ema_cli.identify.torque.problem import PARAM_UNITS
 
         rows = [{"parameter": n, "unit": PARAM_UNITS[n], **s}
                 for n, s in self.result.summary().items()]
@@ -105,7 +105,7 @@ def load_settings(config: ConfigSource = None, overrides: Overrides = None
     """The validated identification settings of ``config`` with ``overrides`` (what
     :func:`identify` runs), e.g. to report the method before a long run."""
     from ema_cli.config.loader import load_config
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.identify.torque.settings import IdentifySettings
 
     return load_config(config, override_pairs(overrides), IdentifySettings)
 
@@ -117,11 +117,11 @@ def identify(config: ConfigSource = None, overrides: Overrides = None,
     config     identification settings: a YAML file, a dict, an ``IdentifySettings`` or None
     overrides  dotted paths -> values, e.g. ``{"ga.pop": 50}``
     settings   top-level settings by name, e.g. ``k_range=(500, 700)``, ``method="exact"``,
-               ``data="log.csv"``, ``runs=5`` (see ``identify.settings.IdentifySettings``)
+               ``data="log.csv"``, ``runs=5`` (see ``identify.torque.settings.IdentifySettings``)
     """
     from ema_cli.config.loader import load_config
-    from ema_cli.identify.run import run_identification
-    from ema_cli.identify.settings import IdentifySettings
+    from ema_cli.identify.torque.run import run_identification
+    from ema_cli.identify.torque.settings import IdentifySettings
 
     pairs = override_pairs(overrides)
     pairs += [(k, list(v) if isinstance(v, tuple) else v) for k, v in settings.items()]

@@ -15,9 +15,9 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
-    from ema_cli.identify.closed_loop_fit import ClosedLoopFit
-    from ema_cli.identify.friction_sweep import FrictionFit
-    from ema_cli.identify.synthetic_logs import SyntheticLog
+    from ema_cli.identify.closed_loop.ga_fit import ClosedLoopFit
+    from ema_cli.identify.friction.sweep import FrictionFit
+    from ema_cli.identify.make_data import SyntheticLog
 
 
 def _parameters_frame(js: dict[str, Any]) -> pd.DataFrame:
@@ -79,7 +79,7 @@ def make_data_inputs(config: ConfigSource = None, overrides: Overrides = None,
 
 @dataclass
 class ClosedLoopIdentification:
-    """A closed-loop identification: ``result`` is ``identify.closed_loop_fit.ClosedLoopFit``."""
+    """A closed-loop identification: ``result`` is ``identify.closed_loop.ga_fit.ClosedLoopFit``."""
 
     result: ClosedLoopFit
 
@@ -124,7 +124,7 @@ class ClosedLoopIdentification:
 
 @dataclass
 class FrictionSweepIdentification:
-    """A friction-sweep identification: ``result`` is ``identify.friction_sweep.FrictionFit``."""
+    """A friction-sweep identification: ``result`` is ``identify.friction.sweep.FrictionFit``."""
 
     result: FrictionFit
     settings: Any
@@ -165,7 +165,7 @@ class FrictionSweepIdentification:
 
 @dataclass
 class SyntheticData:
-    """Synthetic identification data: ``log`` is ``identify.synthetic_logs.SyntheticLog``."""
+    """Synthetic identification data: ``log`` is ``identify.make_data.SyntheticLog``."""
 
     log: SyntheticLog
     settings: Any
@@ -207,8 +207,8 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
     ``columns=`` a column map, ``window=`` (T0, T1) [s]), as ``ema identify --closed-loop``
     does; settings: ``identify.log_settings.ClosedLoopSettings``."""
     from ema_cli.config.loader import load_config
-    from ema_cli.identify.closed_loop import load_log
-    from ema_cli.identify.closed_loop_fit import run_closed_loop
+    from ema_cli.identify.closed_loop.ga_fit import run_closed_loop
+    from ema_cli.identify.closed_loop.problem import load_log
     from ema_cli.identify.log_settings import ClosedLoopSettings
 
     pairs = override_pairs(overrides) + list(settings.items())
@@ -258,7 +258,7 @@ def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = 
     --friction-sweep`` does; settings: ``identify.log_settings.FrictionSweepSettings``."""
     from ema_cli.config.loader import load_config
     from ema_cli.errors import EmaError
-    from ema_cli.identify.friction_sweep import fit_friction_sweep, load_sweep
+    from ema_cli.identify.friction.sweep import fit_friction_sweep, load_sweep
     from ema_cli.identify.log_settings import FrictionSweepSettings
 
     pairs = override_pairs(overrides) + list(settings.items())
@@ -276,7 +276,7 @@ def make_identification_data(config: ConfigSource = None, overrides: Overrides =
     ``plant``, ...)."""
     from ema_cli.config.loader import load_config
     from ema_cli.identify.log_settings import MakeDataSettings
-    from ema_cli.identify.synthetic_logs import closed_loop_log, friction_sweep_log
+    from ema_cli.identify.make_data import closed_loop_log, friction_sweep_log
 
     pairs = override_pairs(overrides) + list(settings.items())
     cfg = load_config(config, pairs, MakeDataSettings)

@@ -34,7 +34,7 @@ def compile_unit(name: str, quiet: bool = False) -> float:
             return compile_unit(name)
     t0 = time.perf_counter()
     if name == IDENTIFY:
-        from ema_cli.identify.run import warm_kernels
+        from ema_cli.identify.torque.run import warm_kernels
 
         with compiled.announce(name):
             warm_kernels()

@@ -104,10 +104,10 @@ def run_threshold_tuning(path: Path, tid: str, rel: str, log: Any = print
 def identification_summary(settings: Any, out: Path | None = None,
                            with_paper_mode: bool = True, with_mismatch: bool = True
                            ) -> dict[str, Any]:
-    """``identify.run.summarize_identification`` (its flat scalars are returned) and, when
+    """``identify.torque.run.summarize_identification`` (its flat scalars are returned) and, when
     ``out`` is given, the identify folders written there (the paper-mode run's in
     ``out/ga-paper``, by ``report.identify_figures.write_identification_summary``)."""
-    from ema_cli.identify.run import summarize_identification
+    from ema_cli.identify.torque.run import summarize_identification
     from ema_cli.report.identify_figures import write_identification_summary
 
     summary = summarize_identification(settings, with_paper_mode, with_mismatch)

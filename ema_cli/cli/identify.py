@@ -20,7 +20,7 @@ from ema_cli.progress import report as report_stage
 
 if TYPE_CHECKING:
     from ema_cli.api.identification import Identification
-    from ema_cli.identify.run import IdentificationResult
+    from ema_cli.identify.torque.run import IdentificationResult
 
 Range = tuple[float, float]
 
@@ -29,7 +29,7 @@ def result_table(res: IdentificationResult) -> None:
     """Print identified (median over runs), truth, |error| % (median / worst), LS optimum ± SE
     and the runs' |distance| to it, with units."""
     from ema_cli.cli.output import print_table
-    from ema_cli.identify.problem import PARAM_UNITS
+    from ema_cli.identify.torque.problem import PARAM_UNITS
     from ema_cli.units import fmt_num
 
     summ = res.summary()
@@ -238,7 +238,7 @@ def identify_cmd(
 def print_identification(ident: Identification, folder: Path) -> None:
     """The closing lines of a torque-data identification: the result table, warnings, units,
     the data, the cost and the timings."""
-    from ema_cli.identify.problem import PARAM_UNITS
+    from ema_cli.identify.torque.problem import PARAM_UNITS
 
     res = ident.result
     result_table(res)

@@ -63,7 +63,7 @@ def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
 
         has_free = "free" in read_yaml(config)
     if not has_free:
-        from ema_cli.identify.closed_loop import DEFAULT_FREE
+        from ema_cli.identify.closed_loop.problem import DEFAULT_FREE
 
         pairs = [("free", {k: list(v) for k, v in DEFAULT_FREE.items()}), *pairs]
     return [*pairs, *extra]
@@ -189,7 +189,7 @@ def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | No
     flag = "--closed-loop" if syn.log.kind == "closed-loop" else "--friction-sweep"
     keep = ""
     if syn.log.kind == "closed-loop":  # what the fit must hold fixed as the data had it
-        from ema_cli.identify.closed_loop import DEFAULT_FREE
+        from ema_cli.identify.closed_loop.problem import DEFAULT_FREE
 
         keep = "".join(f" --set plant.{k}={v}" for k, v in syn.settings.plant.items()
                        if k not in DEFAULT_FREE)

@@ -249,7 +249,7 @@ def validate_cmd(
         return
     if kind == "identify":
         from ema_cli.config.loader import load_config
-        from ema_cli.identify.settings import IdentifySettings
+        from ema_cli.identify.torque.settings import IdentifySettings
 
         s = load_config(config, overrides, IdentifySettings)
         console.print(f"{config}: valid identification settings; method {s.method}, "

@@ -73,6 +73,16 @@ class Transmission(Strict):
     contact: Literal["contact", "paper"] | None = Field(
         None, description="damping form in the backlash: contact (pushes, never pulls) or "
                           "paper (Eq. 2 literally)")
+    friction: Q | None = Field(
+        None, description="friction inside the transmission, load side [N*m | N]: a Dahl "
+                          "element in parallel with the shaft, the half height of the "
+                          "torque-twist loop (the hysteresis of a real gearbox)")
+    friction_stiffness: Q | None = Field(
+        None, description="the transmission friction's Dahl stiffness, the loop's slope just "
+                          "after a reversal [N*m/rad | N/m] (default: the stiffness)")
+    preload: Q | None = Field(
+        None, description="anti-backlash preload, load side [N*m | N]: inside the backlash the "
+                          "torque rises linearly from -preload to +preload (needs backlash)")
 
 
 class Motor(Strict):
@@ -260,7 +270,8 @@ class Actuator(Strict):
         t = self.transmission
         if t.type == "rigid":
             out["rigid"] = 1.0
-            for k in ("stiffness", "damping", "damping_ratio", "backlash", "contact"):
+            for k in ("stiffness", "damping", "damping_ratio", "backlash", "contact",
+                      "friction", "friction_stiffness", "preload"):
                 if getattr(t, k) is not None:
                     raise ValueError(f"{KEY}transmission.{k}{KEY}a rigid transmission has no "
                                      f"{k.replace('_', ' ')} (type: compliant has)")
@@ -272,6 +283,12 @@ class Actuator(Strict):
             put("alpha", t.backlash, "position", "transmission.backlash")
             if t.contact is not None:
                 out["damping"] = t.contact
+            put("Fc_t", t.friction, "force", "transmission.friction")
+            put("sigma_t", t.friction_stiffness, "stiffness", "transmission.friction_stiffness")
+            put("preload", t.preload, "force", "transmission.preload")
+            if t.preload is not None and t.backlash is None and out.get("preload", 0.0) > 0.0:
+                raise ValueError(f"{KEY}transmission.preload{KEY}a preload bridges the backlash: "
+                                 "give transmission.backlash > 0")
         put("Jm", self.motor.inertia, "inertia", "motor.inertia", None)
         put("bm", self.motor.viscous, "damping", "motor.viscous", None)
         ld = self.load
@@ -468,6 +485,8 @@ _KEY_OF = {"m": "ratio", "kL": "transmission.stiffness", "c": "transmission.damp
            "alpha": "transmission.backlash", "Jm": "motor.inertia", "bm": "motor.viscous",
            "JL": "load.inertia or load.mass", "bL": "load.viscous", "amp_gain": "drive.gain",
            "amp_limit": "drive.limit", "R": "drive.resistance", "L": "drive.inductance",
-           "Kt": "drive.torque_constant", "Ke": "drive.emf_constant"}
+           "Kt": "drive.torque_constant", "Ke": "drive.emf_constant",
+           "Fc_t": "transmission.friction", "sigma_t": "transmission.friction_stiffness",
+           "preload": "transmission.preload"}
 """The description key a parameter comes from (for messages)."""
 AXIS_NAMES = AXES

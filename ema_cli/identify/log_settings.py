@@ -21,7 +21,7 @@ from ema_cli.config.base import (
 )
 from ema_cli.config.run import KEY_MARK
 from ema_cli.errors import EmaError
-from ema_cli.identify.closed_loop import CHANNELS, DEFAULT_FREE
+from ema_cli.identify.closed_loop.problem import CHANNELS, DEFAULT_FREE
 from ema_cli.model.params import check_value
 
 Scalar = float | int | str
@@ -159,7 +159,7 @@ class ClosedLoopSettings(Strict):
     @field_validator("columns")
     @classmethod
     def _columns(cls, v: dict[str, str] | None) -> dict[str, str] | None:
-        from ema_cli.identify.log_files import parse_column_spec
+        from ema_cli.identify.logs.channels import parse_column_spec
 
         for key, spec in (v or {}).items():
             try:
@@ -177,7 +177,7 @@ class ClosedLoopSettings(Strict):
 
     @model_validator(mode="after")
     def _check(self) -> ClosedLoopSettings:
-        from ema_cli.identify.closed_loop import check_free
+        from ema_cli.identify.closed_loop.problem import check_free
 
         try:
             check_free(self.free, self.plant)

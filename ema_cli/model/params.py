@@ -81,6 +81,14 @@ PARAMS: tuple[Param, ...] = (
           "damping coefficient c*((1-h) + h*penetration/contact_pen) (0: linear damping)"),
     Param("contact_pen", "rad", CONTACT_PEN, "contact form: penetration at which the "
           "Hunt-Crossley share's damping coefficient equals c"),
+    Param("Fc_t", "N*m", 0.0, "transmission friction, load side: the level of a Dahl element "
+          "in parallel with the shaft, the half height of the torque-twist loop (0: none)",
+          side="load"),
+    Param("sigma_t", "N*m/rad", None, "transmission friction: Dahl stiffness, the loop's slope "
+          "right after a reversal, load side; default kL", side="load"),
+    Param("preload", "N*m", 0.0, "anti-backlash preload, load side: inside the gap the torque "
+          "rises linearly from -preload to +preload, in contact it adds to the teeth's "
+          "(needs alpha > 0)", side="load"),
     # controllers
     Param("Kpp", "1/s", 50.0, "position P gain (w*_L = Kpp*e_theta)"),
     Param("Kps", "V*s/rad", 0.15, "speed PI proportional gain (motor side)"),
@@ -393,6 +401,17 @@ def _resolve_description(values: dict[str, float | None]) -> None:
                                    f"'{b}' (Coulomb friction, {v[b]:g}) for the static law")
     if v["friction_L"] == 1.0 and (v["Fc_L"] <= 0 or v["vs_L"] <= 0):  # type: ignore[operator]
         raise EmaError("LuGre friction at the load needs Fc_L > 0 and vs_L > 0")
+    if v["sigma_t"] is None:
+        v["sigma_t"] = v["kL"]
+    if v["Fc_t"] > 0.0 and not v["sigma_t"] > 0.0:  # type: ignore[operator]
+        raise EmaError(f"parameter 'sigma_t' (transmission friction's Dahl stiffness) must be > 0"
+                       f" when Fc_t > 0, got {v['sigma_t']}")
+    if v["preload"] > 0.0 and v["alpha"] <= 0.0:  # type: ignore[operator]
+        raise EmaError(f"parameter 'preload' ({v['preload']:g} N*m) bridges the backlash: it needs "
+                       "a half backlash alpha > 0")
+    if v["rigid"] == 1.0 and (v["Fc_t"] > 0.0 or v["preload"] > 0.0):  # type: ignore[operator]
+        raise EmaError("transmission friction (Fc_t) and preload need a compliant transmission: a "
+                       "rigid axis has no twist")
     if v["rigid"] == 1.0:
         if v["alpha"]:
             raise EmaError(f"parameter 'alpha' (backlash, {v['alpha']:g} rad) needs a compliant "

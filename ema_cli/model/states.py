@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ema_cli.model import drive, plant, thermal
+from ema_cli.model import drive, plant, thermal, transmission
 
 
 @dataclass(frozen=True)
@@ -39,10 +39,10 @@ class State:
     hold: tuple[str, ...] = ()
     """Conditions (names bound like ``rate``'s arguments) under which the state is held: its rate
     is then 0 (the locked motor, a rigid axis's motor, a site that sticks)."""
-    present: str = ""
-    """A structural flag (``model.actuator.FLAGS``) without which the state is absent from a
-    variant: its rate is not computed, RK4 and the store leave it alone (an element that is off
-    costs the kernel nothing). Empty: in every variant."""
+    active: tuple[str, ...] = ()
+    """Structural flags (``model.actuator.FLAGS``) the state needs to evolve at all: in a variant
+    without one of them the state keeps its initial value and takes no part in the integration
+    (its element is absent: no arithmetic, the other states' code unchanged)."""
 
 
 STATES: tuple[State, ...] = (
@@ -59,12 +59,14 @@ STATES: tuple[State, ...] = (
     State("xI", "rad", "speed-PI integral of the speed error (motor side)",
           rate=plant.speed_integral_rate_nb, side="motor", hold=("locked",)),
     State("f_amp", "N*m", "amplifier output (force or torque on the axis, load side)",
-          rate=drive.amplifier_rate_nb, side="load"),
+          rate=drive.amplifier_rate_nb, side="load", active=("amp_bw",)),
     State("z_L", "rad", "LuGre bristle deflection at the load", kind="exact", side="load"),
+    State("f_t", "N*m", "transmission friction torque (Dahl element), load side",
+          rate=transmission.friction_rate_nb, side="load", active=("trans",)),
     State("th_w", "K", "winding temperature rise above ambient (thermal element)",
-          rate=thermal.winding_rate_nb, present="thermal"),
+          rate=thermal.winding_rate_nb, active=("thermal",)),
     State("th_h", "K", "housing temperature rise above ambient (thermal element)",
-          rate=thermal.housing_rate_nb, present="thermal"),
+          rate=thermal.housing_rate_nb, active=("thermal",)),
 )
 STATE_INDEX: dict[str, int] = {s.name: k for k, s in enumerate(STATES)}
 N_STATES = len(STATES)

@@ -114,3 +114,63 @@ def shaft_torque(dth: np.ndarray, dw: np.ndarray, kL: float, alpha: float, c: fl
                           inverse_tau(float(tau)), float(hc), hc_gain(float(hc), float(pen_ref)),
                           dth.ravel(), dw.ravel(), out.ravel())
     return out
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def preload_torque_nb(preload, alpha, dth):
+    """The anti-backlash preload's torque [N*m, load side] at deflection ``dth`` [rad]: a spring
+    preloaded to ``preload`` [N*m] bridges the gap of half width ``alpha`` [rad] > 0, so inside
+    it the torque rises linearly from -preload to +preload, and in contact the preload adds to
+    the teeth's torque (:func:`shaft_torque_nb`)::
+
+        T_pre = preload * clip(dth/alpha, -1, +1)
+
+    The torque-twist curve is then continuous: slope preload/alpha through the gap, then
+    kL + the same offset. ``preload = 0``: nothing (the plain dead band)."""
+    return preload * min(max(dth / alpha, -1.0), 1.0)
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def friction_rate_nb(w_m, w_L, inv_m, f_t, Fc_t, sigma_t, trans):
+    """d f_t/dt of the transmission's friction [N*m/s, load side]: a Dahl element in parallel
+    with the shaft, driven by the twist rate ``dw = w_m/m - w_L`` [rad/s]::
+
+        df_t/dt = sigma_t * (dw - |dw| * f_t / Fc_t)
+
+    ``f_t`` tends to ``+-Fc_t`` [N*m] while the twist grows (shrinks): the loaded and unloaded
+    branches of a torque-twist loop lie ``2*Fc_t`` apart, joined after each reversal by an
+    exponential of twist scale ``Fc_t/sigma_t`` [rad] (``sigma_t`` [N*m/rad]: the slope right
+    after a reversal; Dahl 1968, rate-independent). 0 when the variant has no transmission
+    friction (``trans`` False) or ``Fc_t = 0``."""
+    if not trans or Fc_t <= 0.0:
+        return 0.0
+    dw = w_m * inv_m - w_L
+    return sigma_t * (dw - abs(dw) * f_t / Fc_t)
+
+
+def dahl_path(dth: np.ndarray, Fc_t: float, sigma_t: float, f0: float = 0.0) -> np.ndarray:
+    """The Dahl friction torque [N*m] along a sampled twist path ``dth[n]`` [rad], exactly for
+    a twist monotonic between samples (the element is rate-independent, so the path is all it
+    needs): after an increment ``d`` of sign ``s``,
+    ``f <- s*Fc_t + (f - s*Fc_t) * exp(-sigma_t*|d|/Fc_t)``. ``f0``: the torque at ``dth[0]``."""
+    dth = np.asarray(dth, dtype=np.float64)
+    out = np.empty_like(dth)
+    if dth.size == 0:
+        return out
+    return _dahl_path_nb(dth, float(Fc_t), float(sigma_t), float(f0), out)
+
+
+@njit(cache=True, error_model="numpy")
+def _dahl_path_nb(dth, Fc_t, sigma_t, f0, out):
+    f = f0
+    out[0] = f
+    if Fc_t <= 0.0:
+        out[:] = 0.0
+        return out
+    for k in range(1, dth.shape[0]):
+        d = dth[k] - dth[k - 1]
+        if d != 0.0:
+            s = 1.0 if d > 0.0 else -1.0
+            f = s * Fc_t + (f - s * Fc_t) * math.exp(-sigma_t * abs(d) / Fc_t)
+        out[k] = f
+    return out

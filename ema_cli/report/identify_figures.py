@@ -3,7 +3,7 @@
 The figure functions take an ``IdentificationResult`` and return a Figure (no file I/O);
 :func:`write_identification` writes the whole output folder through ``report.rundir``;
 :func:`write_identification_summary` writes the folders of an
-``identify.run.summarize_identification``; :func:`write_example_csv` writes identification
+``identify.torque.run.summarize_identification``; :func:`write_example_csv` writes identification
 data as a CSV.
 """
 
@@ -22,8 +22,8 @@ from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json
 
 if TYPE_CHECKING:
-    from ema_cli.identify.data import IdentData
-    from ema_cli.identify.run import IdentificationResult, IdentificationSummary
+    from ema_cli.identify.torque.data import IdentData
+    from ema_cli.identify.torque.run import IdentificationResult, IdentificationSummary
 
 LOG_FLOOR_DECADES = 30  # J plots on a log axis are floored this many decades below the start
 REL_FLOOR_PCT = 1e-14  # distances to the optimum below this (rounding) are drawn at it [%]
@@ -226,7 +226,7 @@ def write_identification(
 
 
 def write_identification_summary(summary: IdentificationSummary, out: Path) -> None:
-    """Write the identify folder of every run of ``summary`` (``identify.run.
+    """Write the identify folder of every run of ``summary`` (``identify.torque.run.
     summarize_identification``) under ``out`` (the paper-mode run's in ``out/ga-paper``)."""
     for sub, res in summary.results.items():
         write_identification(res, Path(out) / sub, command="identify (library)")

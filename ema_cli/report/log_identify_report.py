@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from ema_cli.identify.closed_loop import CHANNELS, make_grid
+from ema_cli.identify.closed_loop.problem import CHANNELS, make_grid
 from ema_cli.report.figures import subplots
 from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import (
@@ -27,9 +27,9 @@ from ema_cli.report.rundir import (
 from ema_cli.units import RPM
 
 if TYPE_CHECKING:
-    from ema_cli.identify.closed_loop_fit import ClosedLoopFit
-    from ema_cli.identify.friction_sweep import FrictionFit
-    from ema_cli.identify.synthetic_logs import SyntheticLog
+    from ema_cli.identify.closed_loop.ga_fit import ClosedLoopFit
+    from ema_cli.identify.friction.sweep import FrictionFit
+    from ema_cli.identify.make_data import SyntheticLog
 
 CHANNEL_LABELS = {"theta_load_deg": "load angle", "omega_motor_rpm": "motor speed",
                   "current_a": "armature current", "voltage_cmd_v": "voltage demand"}

@@ -61,12 +61,15 @@ def rk4(x, h, ra, rb, rc, la, lb, lc, ea, eb, ec, lp, fl, uh, disc, xn2, tfh, tf
     -> the state at its end (the non-rk4 states unchanged)."""
     k1 = _stage_rates(x, ra, la, ea, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m,
                       dir_m, stuck_l, dir_l, hw, variant)
-    k2 = _stage_rates(variant_stage(x, 0.5 * h, k1, variant), rb, lb, eb, lp, fl, uh, disc, xn2,
-                      tfh, tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
-    k3 = _stage_rates(variant_stage(x, 0.5 * h, k2, variant), rb, lb, eb, lp, fl, uh, disc, xn2,
-                      tfh, tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
-    k4 = _stage_rates(variant_stage(x, h, k3, variant), rc, lc, ec, lp, fl, uh, disc, xn2, tfh,
-                      tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
+    x2 = variant_stage(x, 0.5 * h, k1, variant)
+    k2 = _stage_rates(x2, rb, lb, eb, lp, fl, uh, disc, xn2, tfh, tf_b,
+                      visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
+    x3 = variant_stage(x, 0.5 * h, k2, variant)
+    k3 = _stage_rates(x3, rb, lb, eb, lp, fl, uh, disc, xn2, tfh, tf_b,
+                      visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
+    x4 = variant_stage(x, h, k3, variant)
+    k4 = _stage_rates(x4, rc, lc, ec, lp, fl, uh, disc, xn2, tfh, tf_b, visc,
+                      tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw, variant)
     return variant_combine(x, h / 6.0, k1, k2, k3, k4, variant)
 
 

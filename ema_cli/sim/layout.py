@@ -209,12 +209,6 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
         fl_values = dict(zip(actuator.FLAGS, actuator.flags_nb.py_func(int(variant)),
                              strict=True))
     st_names = [s.name for s in states]
-    absent = {s.name for s in states
-              if s.present and fl_values is not None and not fl_values[s.present]}
-    stored = [(k, n) for k, n in enumerate(st_names) if n not in absent]
-
-    def rk4(s: Any) -> bool:  # integrated by RK4 in this variant
-        return s.kind == "rk4" and s.name not in absent
     lines = [
         f"S_PARAM, S_DERIVED, S_MEMORY = {START['param']}, {START['derived']}, "
         f"{START['memory']}",
@@ -228,8 +222,7 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
         "    return " + _rows_tuple("X", st_names, "S_STATE"),
         "",
         "def store_x(W, j, x):",
-        *(f"    W[S_STATE + {k}, j] = x.{n}" for k, n in stored),
-        *(["    pass"] if not stored else []),
+        *(f"    W[S_STATE + {k}, j] = x.{n}" for k, n in enumerate(st_names)),
         "",
         "def load_mem(W, j):",
         "    return " + _rows_tuple("Mem", [m for m, _ in MEMORY], "S_MEMORY"),
@@ -258,13 +251,18 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
     for s in states:
         fields = ", ".join("v" if o.name == s.name else f"x.{o.name}" for o in states)
         lines += [f"def set_{s.name}(x, v):", f"    return X({fields})", ""]
-    # RK4: a stage's state, and the step's combination, over the rk4 states (the others kept)
-    stage = ", ".join(f"x.{s.name} + hh * k.{s.name}" if rk4(s) else f"x.{s.name}"
+    # RK4: a stage's state, and the step's combination, over the rk4 states the variant has
+    # (the others kept: a state whose element is absent takes no part)
+    def integrated(s: Any) -> bool:
+        return s.kind == "rk4" and (fl_values is None
+                                    or all(bool(fl_values[f]) for f in s.active))
+
+    stage = ", ".join(f"x.{s.name} + hh * k.{s.name}" if integrated(s) else f"x.{s.name}"
                       for s in states)
     lines += ["def rk4_stage(x, hh, k):", f"    return X({stage})", ""]
     comb = ", ".join(
         f"x.{s.name} + h6 * (k1.{s.name} + 2.0 * k2.{s.name} + 2.0 * k3.{s.name} + k4.{s.name})"
-        if rk4(s) else f"x.{s.name}" for s in states)
+        if integrated(s) else f"x.{s.name}" for s in states)
     lines += ["def rk4_combine(x, h6, k1, k2, k3, k4):", f"    return X({comb})", ""]
     # the state equations, their arguments bound by name
     # (a structural flag is read from the variant, a compile-time constant, before the
@@ -273,7 +271,7 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
               "prm": LANE_FIELDS}
     calls = {}
     for s in states:
-        if not rk4(s):
+        if not integrated(s):
             continue
         args = list(inspect.signature(s.rate.py_func if hasattr(s.rate, "py_func")
                                       else s.rate).parameters)
@@ -338,10 +336,8 @@ def build(states: tuple = STATES) -> dict[str, Any]:
     return out
 
 
-def _rates_for(variant: int | None, states: tuple = STATES, name: str = "rates") -> Any:
-    """The compiled ``name`` of ``variant`` (None: of any variant), generated once: its state
-    equations (``rates``), RK4 stage and combination (``rk4_stage``, ``rk4_combine``, without
-    the states absent from it) or the store of its state (``store_x``)."""
+def _rates_for(variant: int | None, states: tuple = STATES) -> Any:
+    """The compiled state equations of ``variant`` (None: of any variant), generated once."""
     key = (variant, states)
     if key not in _RATES:
         import numpy as np
@@ -354,31 +350,26 @@ def _rates_for(variant: int | None, states: tuple = STATES, name: str = "rates")
         code = source(states, variant)
         exec(compile(code, f"<ema_cli.sim.layout: variant {variant}>", "exec"), ns)  # noqa: S102
         jit = njit(forceinline=True, error_model="numpy")
-        _RATES[key] = {n: jit(ns[n]) for n in ("rates", "rk4_stage", "rk4_combine", "store_x")}
-    return _RATES[key][name]
+        _RATES[key] = tuple(jit(ns[n]) for n in ("rates", "rk4_stage", "rk4_combine"))
+    return _RATES[key]
 
 
-_RATES: dict[tuple[int | None, tuple], dict[str, Any]] = {}
-
-
-def _literal(variant: Any) -> int | None:
-    from numba.core import types
-
-    return variant.literal_value if isinstance(variant, types.IntegerLiteral) else None
-
-
-_OL = {"forceinline": True, "fastmath": {"contract"}, "error_model": "numpy"}
+_RATES: dict[tuple[int | None, tuple], Any] = {}
 
 
 def variant_rates(x: Any, alg: Any, prm: Any, variant: int) -> Any:
     """The rates of the ``rk4`` states (:class:`X`) for the kernel's ``variant``: the generated
     state equations of that variant (compiled once per variant; plain Python without the JIT)."""
-    return _rates_for(int(variant))(x, alg, prm, actuator.flags_nb(variant))
+    return _rates_for(int(variant))[0](x, alg, prm, actuator.flags_nb(variant))
 
 
-@overload(variant_rates, prefer_literal=True, jit_options=_OL)
+@overload(variant_rates, prefer_literal=True,
+          jit_options={"forceinline": True, "fastmath": {"contract"}, "error_model": "numpy"})
 def _variant_rates_ol(x, alg, prm, variant):  # noqa: ANN001, ANN202 (numba's overload API)
-    fn = _rates_for(_literal(variant))
+    from numba.core import types
+
+    code = variant.literal_value if isinstance(variant, types.IntegerLiteral) else None
+    fn = _rates_for(code)[0]
     flags = actuator.flags_nb
 
     def impl(x, alg, prm, variant):  # noqa: ANN001, ANN202 (numba's overload)
@@ -387,45 +378,40 @@ def _variant_rates_ol(x, alg, prm, variant):  # noqa: ANN001, ANN202 (numba's ov
 
 
 def variant_stage(x: Any, hh: float, k: Any, variant: int) -> Any:
-    """An RK4 stage's state ``x + hh*k`` over the states ``variant`` integrates."""
-    return _rates_for(int(variant), name="rk4_stage")(x, hh, k)
+    """An RK4 stage's state ``x + hh*k`` over the states ``variant`` integrates (the others
+    kept; plain Python without the JIT)."""
+    return _rates_for(int(variant))[1](x, hh, k)
 
 
-@overload(variant_stage, prefer_literal=True, jit_options=_OL)
+def variant_combine(x: Any, h6: float, k1: Any, k2: Any, k3: Any, k4: Any, variant: int) -> Any:
+    """The RK4 step's combination ``x + h6*(k1 + 2 k2 + 2 k3 + k4)`` over the states
+    ``variant`` integrates (the others kept)."""
+    return _rates_for(int(variant))[2](x, h6, k1, k2, k3, k4)
+
+
+def _literal(variant: Any) -> int | None:
+    from numba.core import types
+
+    return variant.literal_value if isinstance(variant, types.IntegerLiteral) else None
+
+
+@overload(variant_stage, prefer_literal=True,
+          jit_options={"forceinline": True, "error_model": "numpy"})
 def _variant_stage_ol(x, hh, k, variant):  # noqa: ANN001, ANN202 (numba's overload API)
-    fn = _rates_for(_literal(variant), name="rk4_stage")
+    fn = _rates_for(_literal(variant))[1]
 
     def impl(x, hh, k, variant):  # noqa: ANN001, ANN202 (numba's overload)
         return fn(x, hh, k)
     return impl
 
 
-def variant_combine(x: Any, h6: float, k1: Any, k2: Any, k3: Any, k4: Any, variant: int) -> Any:
-    """RK4's combination ``x + h/6 (k1 + 2 k2 + 2 k3 + k4)`` over the states ``variant``
-    integrates (the others kept)."""
-    return _rates_for(int(variant), name="rk4_combine")(x, h6, k1, k2, k3, k4)
-
-
-@overload(variant_combine, prefer_literal=True, jit_options=_OL)
+@overload(variant_combine, prefer_literal=True,
+          jit_options={"forceinline": True, "error_model": "numpy"})
 def _variant_combine_ol(x, h6, k1, k2, k3, k4, variant):  # noqa: ANN001, ANN202 (numba's API)
-    fn = _rates_for(_literal(variant), name="rk4_combine")
+    fn = _rates_for(_literal(variant))[2]
 
     def impl(x, h6, k1, k2, k3, k4, variant):  # noqa: ANN001, ANN202 (numba's overload)
         return fn(x, h6, k1, k2, k3, k4)
-    return impl
-
-
-def variant_store_x(W: Any, j: int, x: Any, variant: int) -> None:
-    """Store the state of lane ``j`` (the states absent from ``variant`` left as they are)."""
-    _rates_for(int(variant), name="store_x")(W, j, x)
-
-
-@overload(variant_store_x, prefer_literal=True, jit_options=_OL)
-def _variant_store_ol(W, j, x, variant):  # noqa: ANN001, ANN202 (numba's overload API)
-    fn = _rates_for(_literal(variant), name="store_x")
-
-    def impl(W, j, x, variant):  # noqa: ANN001, ANN202 (numba's overload)
-        fn(W, j, x)
     return impl
 
 
@@ -454,5 +440,6 @@ set_z = _BUILT["set_z"]
 set_xI = _BUILT["set_xI"]
 set_f_amp = _BUILT["set_f_amp"]
 set_z_L = _BUILT["set_z_L"]
+set_f_t = _BUILT["set_f_t"]
 set_th_w = _BUILT["set_th_w"]
 set_th_h = _BUILT["set_th_h"]

@@ -49,6 +49,7 @@ from ema_cli.sim.layout import (
     record,
     store_acc,
     store_mem,
+    store_x,
 )
 from ema_cli.sim.tables import MET, N_METRICS
 
@@ -178,7 +179,8 @@ def step_nb(x, acc, mem, inp, lp, k, dt, n_steps, in_ss, in_osc, variant, dsc):
     ok = (abs(xn.w_m) < W_RUNAWAY and abs(xn.theta_L) < THETA_RUNAWAY
           and abs(xn.i) < I_RUNAWAY and abs(xn.theta_m) < _INF and abs(xn.w_L) < _INF
           and abs(xn.xI) < _INF and abs(z_new) < _INF
-          and (not fl.amp_bw or abs(xn.f_amp) < _INF) and (not fl.lugre_L or abs(zl_new) < _INF))
+          and (not fl.amp_bw or abs(xn.f_amp) < _INF) and (not fl.lugre_L or abs(zl_new) < _INF)
+          and (not fl.trans or abs(xn.f_t) < _INF))
     dies = mem.alive != 0.0 and not ok and k < n_steps
     kend = k + 1.0 if dies else mem.kend
     alive = 0.0 if dies else mem.alive
@@ -218,7 +220,7 @@ def advance_nb(W, k, dt, n_steps, in_ss, in_osc, record_now, variant):
                                   dsc)
         if record_now:
             record(W, j, x, inp, out, lp)
-        layout.variant_store_x(W, j, xn, variant)
+        store_x(W, j, xn)
         store_acc(W, j, acc)
         store_mem(W, j, mem)
 

@@ -22,6 +22,7 @@ from ema_cli.model.actuator import (
     B_FRIC_L,
     B_RIGID,
     B_THERMAL,
+    B_TRANS,
     CTRL_NONE,
     FRIC_LUGRE1,
     FRIC_STATIC,
@@ -49,9 +50,11 @@ def _lane_variant(W, j):
     ctrl = int(W[R.ctrl, j])
     fric_l = int(W[R.friction_L, j])
     ext = ctrl == CTRL_NONE or W[R.dist_out, j] != 0.0
+    trans = W[R.Fc_t, j] > 0.0 or W[R.preload, j] > 0.0
     return (fric_m | (int(extras) << B_EXTRAS) | (int(W[R.rigid, j] != 0.0) << B_RIGID)
             | (int(amp) << B_AMP) | (int(amp and W[R.amp_tau, j] > 0.0) << B_AMP_BW)
             | (fric_l << B_FRIC_L) | (ctrl << B_CTRL) | (int(ext) << B_EXT)
+            | (int(trans) << B_TRANS)
             | (int(W[R.thermal, j] != 0.0) << B_THERMAL))
 
 

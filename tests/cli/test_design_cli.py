@@ -15,7 +15,7 @@ from ema_cli.api.design import corners, design_verdict, fitted_tune_document, sp
 from ema_cli.cli.main import app
 from ema_cli.config.design import EXIT_CODES
 from ema_cli.errors import EmaError
-from ema_cli.identify.closed_loop import MIN_POSITIVE
+from ema_cli.identify.closed_loop.problem import MIN_POSITIVE
 
 ROOT = Path(__file__).resolve().parents[2]
 LOG = str(ROOT / "experiments" / "logs" / "design_hc_1pct.csv")

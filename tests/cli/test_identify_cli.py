@@ -11,8 +11,8 @@ import pytest
 from typer.testing import CliRunner
 
 from ema_cli.cli.main import app
-from ema_cli.identify.run import load_data
-from ema_cli.identify.settings import IdentifySettings
+from ema_cli.identify.torque.run import load_data
+from ema_cli.identify.torque.settings import IdentifySettings
 from ema_cli.report.identify_figures import write_example_csv
 
 runner = CliRunner()

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from ema_cli.cli.main import app
 from ema_cli.errors import EmaError
-from ema_cli.identify.closed_loop import load_log
+from ema_cli.identify.closed_loop.problem import load_log
 from ema_cli.units import DEG, RPM
 
 runner = CliRunner()
@@ -37,7 +37,7 @@ def caught(monkeypatch):
         seen["settings"], seen["log"] = settings, log
         raise EmaError(STUB)
 
-    monkeypatch.setattr("ema_cli.identify.closed_loop_fit.run_closed_loop", stub)
+    monkeypatch.setattr("ema_cli.identify.closed_loop.ga_fit.run_closed_loop", stub)
     return seen
 
 
@@ -152,7 +152,7 @@ def test_real_short_fit_of_a_renamed_parquet_log_in_other_units(tmp_path):
 
     import pandas as pd
 
-    from ema_cli.identify.synthetic_logs import closed_loop_log
+    from ema_cli.identify.make_data import closed_loop_log
 
     syn = closed_loop_log({}, 0.0, 0, duration_s=2.0)
     c = syn.columns

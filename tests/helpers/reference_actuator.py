@@ -28,8 +28,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 # state vector (one layout for every variant; unused states keep a zero derivative)
-TH_M, W_M, CUR, TH_L, W_L, XI, F_AMP = range(7)
-N_STATES = 7
+TH_M, W_M, CUR, TH_L, W_L, XI, F_AMP, F_T = range(8)
+N_STATES = 8
 
 CTRL_PAPER, CTRL_DISCRETE, CTRL_NONE = 0.0, 1.0, 2.0
 DRIVE_ARMATURE, DRIVE_AMPLIFIER = 0.0, 1.0
@@ -192,6 +192,7 @@ class Reference:
 
     def __init__(self, p: Mapping[str, float]):
         self.p = dict(p)
+        self.y_start = np.zeros(N_STATES)  # the state a run of the integrator starts from
         g = self.p.__getitem__
         self._check_supported()
         self.rigid = g("rigid") == 1.0
@@ -228,13 +229,15 @@ class Reference:
 
     def _check_supported(self) -> None:
         g = self.p.__getitem__
-        need = {"alpha": 0.0, "locked": 0.0, "d1": 0.0, "d3": 0.0, "d4": 0.0, "q_speed": 0.0,
+        need = {"locked": 0.0, "d1": 0.0, "d3": 0.0, "d4": 0.0, "q_speed": 0.0,
                 "fb_motor": 0.0, "dzi_v": 0.0, "ff_fc": 0.0, "ff_sigma0": 0.0, "notch_hz": 0.0}
         for k, v in need.items():
             if g(k) != v:
                 raise UnsupportedCase(f"{k} = {g(k)} (the reference needs {v})")
         if g("rigid") != 1.0 and g("damping") != 1.0:
             raise UnsupportedCase("a compliant transmission needs damping = paper")
+        if g("rigid") == 1.0 and g("alpha") != 0.0:
+            raise UnsupportedCase("a rigid axis has no backlash")
         for site in ("friction", "friction_L"):
             if g(site) not in (FRICTION_OFF, FRICTION_STATIC):
                 raise UnsupportedCase(f"{site} = {g(site)}: only off or static")
@@ -262,7 +265,7 @@ class Reference:
         """Every algebraic quantity at (t, y) in modes ``md``, and the derivative ``dy``."""
         p = self.p
         m = self.m
-        thm, wm, cur, thl, wl, xi, famp = y
+        thm, wm, cur, thl, wl, xi, famp, ft = y
         if self.rigid:
             thm, wm = m * thl, m * wl
         r = seg.r(t)
@@ -331,7 +334,17 @@ class Reference:
             dy[W_L] = 0.0 if d == 0 else (fo - ffr) / self.M
             out.update(fo_rigid=fo, ffr=ffr, ffm=ffm, ffl=ffl, wm=wm, thm=thm, thl=thl, wl=wl)
         else:
-            T = p["kL"] * (thm / m - thl) + p["c"] * (wm / m - wl)
+            # the shaft (paper Eq. 2 with its dead band), the anti-backlash preload bridging the
+            # gap (linear from -preload to +preload across it), the Dahl friction in parallel
+            dth, dw = thm / m - thl, wm / m - wl
+            a = p["alpha"]
+            spring = dth - a if dth > a else (dth + a if dth < -a else 0.0)
+            T = p["kL"] * spring + p["c"] * dw
+            if a > 0.0 and p["preload"] > 0.0:
+                T += p["preload"] * max(-1.0, min(1.0, dth / a))
+            if p["Fc_t"] > 0.0:
+                T += ft
+                dy[F_T] = p["sigma_t"] * (dw - abs(dw) * ft / p["Fc_t"])
             fo_m = fd / m - p["bm"] * wm - T / m
             fo_l = T - p["bL"] * wl + text
             dm, dl = md.body.get("motor"), md.body.get("load")
@@ -430,6 +443,20 @@ class Reference:
             c2 = md.clip["sat2"]
             make(lambda t, y: self.evaluate(t, y, seg, md)["ew"], -c2 if md.frozen else c2,
                  "frozen", None)
+        if not self.rigid:  # kinks of the shaft's torque: restart the integration there
+            y0 = self.y_start  # the run's start: each kink's function leaves its sign there
+
+            def kink(fn: Callable[[float, np.ndarray], float], scale: float) -> None:
+                v0 = fn(0.0, y0)
+                if abs(v0) > 1e-12 * scale:  # (at a kink just located: the next run's start)
+                    make(fn, -1 if v0 > 0 else 1, "kink", None)
+
+            m, a = self.m, self.p["alpha"]
+            if a > 0.0:
+                kink(lambda t, y: y[TH_M] / m - y[TH_L] - a, a)
+                kink(lambda t, y: y[TH_M] / m - y[TH_L] + a, a)
+            if self.p["Fc_t"] > 0.0:
+                kink(lambda t, y: y[W_M] / m - y[W_L], 1e-3)
         for body in self.bodies():
             d = md.body[body]
             if d != 0:
@@ -560,7 +587,7 @@ class Result:
 def initial_state(p: Mapping[str, float]) -> np.ndarray:
     y = np.zeros(N_STATES)
     for k, name in ((TH_M, "theta_m"), (W_M, "w_m"), (CUR, "i"), (TH_L, "theta_L"),
-                    (W_L, "w_L"), (XI, "xI"), (F_AMP, "f_amp")):
+                    (W_L, "w_L"), (XI, "xI"), (F_AMP, "f_amp"), (F_T, "f_t")):
         y[k] = p.get(f"x0_{name}", 0.0)
     if p["rigid"] == 1.0:
         y[TH_M] = y[W_M] = 0.0  # derived from the load's
@@ -651,6 +678,7 @@ def simulate(p: Mapping[str, float], sig: Any, t_out: np.ndarray, *, rtol: float
         t = ta
         stalled = 0
         while t < tb:
+            ref.y_start = y
             evs = ref.events(seg, md)
 
             def rhs(tt, yy, seg=seg, md=md):

@@ -190,7 +190,7 @@ def test_battery_plan_is_deterministic_and_pairs_the_laws() -> None:
 def test_a_log_ema_reads(tmp_path) -> None:
     """A 0.3 s log at 500 Hz with 1 % noise: ema's closed-loop reader accepts it and reads
     the truth from the sidecar; the noise is 1 % of each channel's RMS."""
-    from ema_cli.identify.closed_loop import load_log
+    from ema_cli.identify.closed_loop.problem import load_log
 
     truth = {"kL": 700.0, "alpha": 0.002, "Fc": 0.03, "sigma2": 0.01}
     log = make_log(truth, "hunt_crossley", "chirp", 500.0, 1.0, 11, duration_s=0.3)

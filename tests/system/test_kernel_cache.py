@@ -51,7 +51,7 @@ def test_key_is_this_package_and_path_independent(tmp_path):
 
 
 @pytest.mark.parametrize("edit", ["model/params.py", "sim/tables.py", "sim/kernel.py",
-                                  "model/lugre.py", "units.py", "identify/problem.py"])
+                                  "model/lugre.py", "units.py", "identify/torque/problem.py"])
 def test_editing_any_kernel_dependency_changes_the_key(tmp_path, edit):
     pkg = copy_package(tmp_path)
     assert pkg / edit in [pkg / f.relative_to(PACKAGE) for f in keyed_sources()]

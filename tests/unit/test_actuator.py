@@ -109,6 +109,14 @@ def _bad(actuator: dict, **run) -> str:
     ({"controller": {"type": "discrete", "sample_time_s": 1e-3, "fir": [0.5, 0.2]}},
      "actuator.controller.fir", "the taps must sum to 1"),
     ({"controller": {"type": "none"}}, "input.signal", "reads the actuation (controller none)"),
+    ({"transmission": {"preload": "0.2 N*m"}}, "actuator.transmission.preload",
+     "a preload bridges the backlash: give transmission.backlash > 0"),
+    ({"transmission": {"type": "rigid", "friction": "0.2 N*m"}},
+     "actuator.transmission.friction", "a rigid transmission has no friction"),
+    ({"transmission": {"friction": "0.2 N"}}, "actuator.transmission.friction",
+     "N is a translational unit; a rotary axis expects force in N*m"),
+    ({"transmission": {"friction": "-1 N*m"}}, "actuator.transmission.friction",
+     "must be >= 0"),
 ])
 def test_a_bad_description_is_one_line_naming_its_key(actuator, key, words):
     msg = _bad(actuator)

@@ -414,7 +414,27 @@ def _disturbance_cases(hold: bool) -> Element:
     return Element(cases, n_steps=2**15, dec=2**6)
 
 
+def _transmission_cases() -> Element:
+    """The compliant transmission's friction (a Dahl element, level 2..20 % of the axis's force,
+    stiffness 0.3..3 kL) and, on half the cases, a backlash (0.5..3 mrad half width) bridged by
+    an anti-backlash preload (0..10 % of the force), under the discrete cascade; the reference
+    reverses so that the twist rate does and the loop closes."""
+    rng = np.random.default_rng(1010)
+    cases = []
+    for i in range(N_CASES):
+        ax = _axis(rng, "compliant")
+        _drive(rng, ax)
+        _discrete(rng, ax)
+        ov = ax.ov
+        ov.update(Fc_t=ax.force * _un(rng, 0.02, 0.2), sigma_t=ov["kL"] * _lu(rng, 0.3, 3.0))
+        if i % 2:
+            ov.update(alpha=_lu(rng, 5e-4, 3e-3), preload=ax.force * _un(rng, 0.0, 0.1))
+        cases.append(Case(ov, _reference(rng, ax.travel, 0.5)))
+    return Element(cases, n_steps=2**15, dec=2**6)
+
+
 ELEMENTS = {
+    "transmission": _transmission_cases,
     "rigid_axis": _rigid_axis_cases,
     "translational": _translational_cases,
     "amplifier": _amplifier_cases,
@@ -567,6 +587,11 @@ def test_disturbance_interpolated(i):
 @pytest.mark.parametrize("i", CASES)
 def test_disturbance_held(i):
     check("disturbance_held", i)
+
+
+@pytest.mark.parametrize("i", CASES)
+def test_transmission_friction_and_preload(i):
+    check("transmission", i)
 
 
 # ---------------------------------------------------------------- the reference on its own

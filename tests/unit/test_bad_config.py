@@ -33,8 +33,8 @@ from ema_cli.config.loader import (
 from ema_cli.config.run import RunConfig
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
-from ema_cli.identify import settings as id_settings
-from ema_cli.identify.settings import IdentifySettings
+from ema_cli.identify.torque import settings as id_settings
+from ema_cli.identify.torque.settings import IdentifySettings
 from ema_cli.model.nonlinearities import check_distinct, combined_updates, nonlinearity_updates
 from ema_cli.model.params import resolve
 

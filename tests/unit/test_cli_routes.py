@@ -54,8 +54,8 @@ WRITERS = ("run_", "write_", "save_", "finish_", "prepare_", "compute_")
 ALLOWED_MODEL = {"ema_cli.model.params.BY_NAME", "ema_cli.model.nonlinearities.lookup",
                  "ema_cli.model.nonlinearities.nonlinearity_updates",
                  "ema_cli.model.params.resolve", "ema_cli.config.loader.parse_value",
-                 "ema_cli.identify.problem.PARAM_UNITS",
-                 "ema_cli.identify.closed_loop.DEFAULT_FREE",
+                 "ema_cli.identify.torque.problem.PARAM_UNITS",
+                 "ema_cli.identify.closed_loop.problem.DEFAULT_FREE",
                  "ema_cli.config.loader.read_yaml"}
 """Table lookups used to parse and check options (units, names, defaults), not computation."""
 

@@ -15,15 +15,21 @@ import numpy as np
 import pytest
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.closed_loop import CHANNELS, ClosedLoopLog, check_free, load_log, make_grid
-from ema_cli.identify.closed_loop_fit import (
+from ema_cli.identify.closed_loop.ga_fit import (
     build_problem,
     fd_jacobian,
     horizons,
     run_closed_loop,
 )
+from ema_cli.identify.closed_loop.problem import (
+    CHANNELS,
+    ClosedLoopLog,
+    check_free,
+    load_log,
+    make_grid,
+)
 from ema_cli.identify.log_settings import ClosedLoopSettings
-from ema_cli.identify.synthetic_logs import closed_loop_log
+from ema_cli.identify.make_data import closed_loop_log
 from ema_cli.units import DEG
 
 NAMES = ("kL", "alpha", "Fc", "sigma2")

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.friction_sweep import (
+from ema_cli.identify.friction.sweep import (
     SWEEP_NAMES,
     SweepData,
     fit_friction_sweep,
     load_sweep,
     static_curve,
 )
-from ema_cli.identify.synthetic_logs import friction_sweep_log
+from ema_cli.identify.make_data import friction_sweep_log
 from ema_cli.identify.uncertainty import assess, covariance
 from ema_cli.units import RPM
 

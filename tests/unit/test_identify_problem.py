@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ema_cli.identify.data import add_noise
-from ema_cli.identify.exact import solve_exact
-from ema_cli.identify.problem import TorqueProblem
-from ema_cli.identify.run import load_data
-from ema_cli.identify.settings import IdentifySettings
+from ema_cli.identify.torque.data import add_noise
+from ema_cli.identify.torque.exact import solve_exact
+from ema_cli.identify.torque.problem import TorqueProblem
+from ema_cli.identify.torque.run import load_data
+from ema_cli.identify.torque.settings import IdentifySettings
 from ema_cli.model.transmission import shaft_torque
 
 BOUNDS = (np.array([500.0, 0.002]), np.array([700.0, 0.004]))
@@ -57,7 +57,7 @@ def test_model_torque_is_the_simulators_torque(datasets, form):
 def test_exact_jacobian_matches_finite_differences(datasets):
     # the analytic Jacobian of the contact form (the ramp's d/d alpha included) vs central
     # differences of the residuals, at a point off the optimum where samples are ramping
-    from ema_cli.identify.exact import _jacobian
+    from ema_cli.identify.torque.exact import _jacobian
 
     data = datasets["contact"]
     prob = problem(data, "contact", True)
@@ -144,7 +144,7 @@ def test_the_fit_uses_the_datas_contact_tau(datasets):
     # the settings' contact_tau overrides either
     import dataclasses
 
-    from ema_cli.identify.run import build_problem
+    from ema_cli.identify.torque.run import build_problem
     from ema_cli.model.params import CONTACT_TAU
 
     data = datasets["contact"]

@@ -20,8 +20,8 @@ import pytest
 import scipy.io as sio
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.closed_loop import MIN_LOG_ROWS, load_log
-from ema_cli.identify.log_files import read_log, read_log_table
+from ema_cli.identify.closed_loop.problem import MIN_LOG_ROWS, load_log
+from ema_cli.identify.logs.channels import read_log, read_log_table
 from ema_cli.units import DEG, RPM
 
 N = 600  # samples of the test log

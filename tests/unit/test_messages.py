@@ -28,12 +28,12 @@ def _oom(*_, **__):
 
 
 def test_out_of_memory_in_a_fit_names_the_log_and_its_length():
-    with mock.patch("ema_cli.identify.closed_loop_fit.run_closed_loop", _oom), \
+    with mock.patch("ema_cli.identify.closed_loop.ga_fit.run_closed_loop", _oom), \
             pytest.raises(EmaError) as exc:
         identify_closed_loop(data=LOG)
     text = str(exc.value)
     assert "design_hc_1pct.csv" in text and "-row, 2 s log" in text and "window" in text
-    with mock.patch("ema_cli.identify.closed_loop_fit.run_closed_loop", _oom):
+    with mock.patch("ema_cli.identify.closed_loop.ga_fit.run_closed_loop", _oom):
         r = runner.invoke(app, ["identify", "--closed-loop", "--data", LOG])
     assert r.exit_code == 2 and "--window" in r.output and "Traceback" not in r.output
 

@@ -22,11 +22,12 @@ from ema_cli.model.params import (
 )
 
 MODEL_MD = Path(__file__).resolve().parents[2] / "docs" / "model.md"
-DERIVED = {"c", "Fs", "sigma0", "sigma1", "Fc_neg", "Fs_neg", "sigma2_neg", "Fs_L", "Fc_L_neg",
+DERIVED = {"c", "sigma_t", "Fs", "sigma0", "sigma1", "Fc_neg", "Fs_neg", "sigma2_neg", "Fs_L",
+           "Fc_L_neg",
            "Fs_L_neg", "Fv_L_neg", "sigma0_L", "sigma1_L"}
 NEGATIVE_OK = {"T_load", "k_h", "offset", *(f"dc_fir{k}" for k in range(8)),
                *(f"x0_{s}" for s in ("theta_m", "w_m", "i", "theta_L", "w_L", "z", "xI", "f_amp",
-                                     "z_L"))}
+                                     "z_L", "f_t"))}
 # docs/model.md §4: only these may be negative (loads, the offset, FIR taps, initial states)
 
 

@@ -29,7 +29,7 @@ from ema_cli.config.sensitivity import SensitivityConfig
 from ema_cli.config.study import StudyConfig
 from ema_cli.config.tune import TuneConfig
 from ema_cli.errors import EmaError
-from ema_cli.identify.settings import IdentifySettings
+from ema_cli.identify.torque.settings import IdentifySettings
 
 ROOT = Path(__file__).resolve().parents[2]
 PROFILE = settings(derandomize=True, deadline=None, database=None, max_examples=300,

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ema_cli.identify.closed_loop import CHANNELS, FLOOR_NOTE, ClosedLoopLog
-from ema_cli.identify.closed_loop_fit import build_problem, run_closed_loop
+from ema_cli.identify.closed_loop.ga_fit import build_problem, run_closed_loop
+from ema_cli.identify.closed_loop.problem import CHANNELS, FLOOR_NOTE, ClosedLoopLog
+from ema_cli.identify.closed_loop.shooting import SEGMENT_STATES
 from ema_cli.identify.log_settings import ClosedLoopSettings
-from ema_cli.identify.shooting import SEGMENT_STATES
-from ema_cli.identify.synthetic_logs import closed_loop_log
+from ema_cli.identify.make_data import closed_loop_log
 from ema_cli.identify.uncertainty import covariance, covariance_clustered
 from ema_cli.model.params import INDEX, resolve, to_row
 from ema_cli.units import DEG
@@ -137,7 +137,7 @@ def _log(syn) -> ClosedLoopLog:
 def _at_truth(plant: dict, seed: int, duration_s: float, segment_s: float):
     """A noisy (1 %) log of the kernel at ``plant``, its problem with the contact law stated,
     the true free vector and the multiple-shooting problem on ``segment_s`` segments."""
-    from ema_cli.identify import shooting_search as ss
+    from ema_cli.identify.closed_loop import shooting_search as ss
 
     syn = closed_loop_log(plant, 1.0, seed, duration_s=duration_s)
     problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
@@ -150,7 +150,7 @@ def test_segments_at_the_truth_fit_to_the_noise_level():
     segment by segment reach the noise level (J/N within 10 % of 1) on a noisy log, and the
     segments are joined: each one's simulated end state is the next one's start within a
     few state scales."""
-    from ema_cli.identify import shooting_search as ss
+    from ema_cli.identify.closed_loop import shooting_search as ss
 
     problem, x, sp = _at_truth({"kL": 450.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 1,
                                1.0, 0.2)
@@ -167,8 +167,8 @@ def test_fitting_some_segments_fits_them_as_a_fit_of_all_does():
     """The state fit of a chosen subset of (start, segment) pairs (the re-seat's suspect
     segments) returns, for those, exactly the states and costs of a fit of every segment (a
     segment fits alone: lanes are independent), and the others unfitted (cost inf)."""
-    from ema_cli.identify import shooting_search as ss
-    from ema_cli.identify.shooting_seat import fit_states, reconstruct, state_starts
+    from ema_cli.identify.closed_loop import shooting_search as ss
+    from ema_cli.identify.closed_loop.shooting_seat import fit_states, reconstruct, state_starts
 
     syn = closed_loop_log({"kL": 600.0, "alpha": 0.003, "Fc": 0.02, "sigma2": 0.01}, 1.0, 2,
                           duration_s=0.6)
@@ -231,7 +231,7 @@ def test_the_fit_itself_is_written_and_drawn_as_the_segments_predict_it(short_fi
     """fit.csv carries each channel as the segments predict it (the fit itself) beside the
     whole-log run: its weighted RMS is the segments' fit quality in identification.json, and
     the channel figure draws it (measured, whole-log check, the fit)."""
-    from ema_cli.identify.closed_loop import CHANNELS
+    from ema_cli.identify.closed_loop.problem import CHANNELS
     from ema_cli.report.log_identify_report import channel_figure, closed_loop_fit_columns
 
     _, fit = short_fit
@@ -267,7 +267,7 @@ def test_a_runner_up_that_disagrees_widens_the_intervals_to_both(monkeypatch):
     """When the runner-up start ends outside the estimate's intervals, the optimum is not
     confirmed and every interval spans both optima (each with the estimate's half-width):
     the runner-up's kL moved 50 % away by hand (far outside the estimate's own interval)."""
-    import ema_cli.identify.shooting_fit as sf
+    import ema_cli.identify.closed_loop.shooting_fit as sf
 
     real = sf.lengthen_both
     moved = {}
@@ -313,8 +313,8 @@ def test_a_noise_free_log_is_judged_on_its_floor():
 def test_the_worst_windows_are_where_the_residuals_are():
     """The verdict names where a channel fits worst: residuals of 1 everywhere, 3 on the
     samples of the third 0.2 s window of the current: that window first, at 3x."""
-    from ema_cli.identify.shooting import make_segments
-    from ema_cli.identify.shooting_quality import mismatch_text, worst_windows
+    from ema_cli.identify.closed_loop.shooting import make_segments
+    from ema_cli.identify.closed_loop.shooting_quality import mismatch_text, worst_windows
 
     syn = closed_loop_log({}, 1.0, 0, duration_s=1.0)
     problem, _ = build_problem(ClosedLoopSettings(free_contact=False), _log(syn))
@@ -347,7 +347,7 @@ def _tie_problem(noise_rpm: float, seed: int, segment_s: float = 0.1):
     """A 2 s log at 1 kHz whose motor angle is known exactly: theta_m(t) = 40 rad x
     sin(2 pi (0.5 t + 1.5 t^2)) (a chirp to 6.5 Hz), its speed logged with white noise of
     ``noise_rpm`` (its stated scale); the other channels smooth stand-ins."""
-    from ema_cli.identify import shooting_search as ss
+    from ema_cli.identify.closed_loop import shooting_search as ss
     from ema_cli.units import RPM
 
     t = np.arange(2001) * 1e-3
@@ -392,7 +392,7 @@ def test_the_tie_check_passes_the_true_motor_angles_and_fails_a_speed_sensor_off
     (an offset) fails it on every draw."""
     from types import SimpleNamespace
 
-    from ema_cli.identify.shooting_fit import tie_check
+    from ema_cli.identify.closed_loop.shooting_fit import tie_check
 
     for seed in range(10):
         sp, theta_m, _ = _tie_problem(20.0, seed)
@@ -412,8 +412,8 @@ def test_the_tie_enters_the_residuals_the_normal_equations_and_the_clusters():
     central finite difference to 1e-6; the normal equations assembled from the compact
     Jacobian equal J^T J and J^T r of the full one; each tie joins its first segment's
     cluster; ``tie_motor_angle: false`` leaves the data residuals alone."""
-    from ema_cli.identify.shooting import NV
-    from ema_cli.identify.shooting_seat import start_states
+    from ema_cli.identify.closed_loop.shooting import NV
+    from ema_cli.identify.closed_loop.shooting_seat import start_states
 
     _, x, sp = _at_truth({"kL": 500.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 5, 1.0,
                          0.2)
@@ -437,7 +437,7 @@ def test_the_tie_enters_the_residuals_the_normal_equations_and_the_clusters():
     groups = sp.groups()
     assert [int(grp[-1]) for grp in groups[:-1]] == list(range(sp.n_data, sp.n_data + n - 1))
     assert sorted(np.concatenate(groups).tolist()) == list(range(R.shape[1]))
-    from ema_cli.identify.shooting import ShootingProblem
+    from ema_cli.identify.closed_loop.shooting import ShootingProblem
 
     free = ShootingProblem(sp.base, sp.seg, sp.sigma, tie=False)
     R0, _ = free.residuals_many(V, 5e-5)
@@ -483,9 +483,9 @@ def test_the_bristle_start_is_continuous_in_the_motor_speed(monkeypatch):
     replaced (the limit Z_SPEED -> 0) the same step jumps the cost 70x as much (measured
     0.34 against 24 here; 8,690 on a battery log): the joint Levenberg-Marquardt could not
     move such a start."""
-    from ema_cli.identify import shooting as sh
-    from ema_cli.identify import shooting_search as ss
-    from ema_cli.identify.shooting import NV, STATE_FD_REL, steady_z
+    from ema_cli.identify.closed_loop import shooting as sh
+    from ema_cli.identify.closed_loop import shooting_search as ss
+    from ema_cli.identify.closed_loop.shooting import NV, STATE_FD_REL, steady_z
 
     prm = resolve({"friction": 1.0, "Fc": 0.03})
     g = prm["Fs"] / prm["sigma0"]
@@ -518,8 +518,8 @@ def test_no_tie_without_a_fitted_motor_speed_or_when_switched_off():
 
     from pydantic import ValidationError
 
-    from ema_cli.identify import shooting_search as ss
-    from ema_cli.identify.shooting_fit import tie_check
+    from ema_cli.identify.closed_loop import shooting_search as ss
+    from ema_cli.identify.closed_loop.shooting_fit import tie_check
 
     sp, _, x = _tie_problem(20.0, 0)
     problem, _ = build_problem(ClosedLoopSettings(free_contact=False,
@@ -541,9 +541,9 @@ def test_the_covariance_of_a_fit_on_few_segments_is_taken_on_its_segments_cut_in
     simulation is (without the state fit: the data cost within 0.5 % of the 5 segments';
     measured 0.0x %, the bristle state re-started), the state fit lowers it, and the
     jackknife has 10 clusters (9 degrees of freedom)."""
-    from ema_cli.identify import shooting_fit as sf
-    from ema_cli.identify import shooting_lengthen as sl
-    from ema_cli.identify import shooting_search as ss
+    from ema_cli.identify.closed_loop import shooting_fit as sf
+    from ema_cli.identify.closed_loop import shooting_lengthen as sl
+    from ema_cli.identify.closed_loop import shooting_search as ss
 
     problem, x, sp = _at_truth({"kL": 650.0, "alpha": 0.002, "Fc": 0.04, "sigma2": 0.01}, 4,
                                1.0, 0.2)
@@ -581,9 +581,9 @@ def test_the_split_of_two_long_segments_has_the_covariance_of_its_parts_at_their
     (measured 1.32 %)."""
     import dataclasses
 
-    from ema_cli.identify import shooting_fit as sf
-    from ema_cli.identify import shooting_lengthen as sl
-    from ema_cli.identify import shooting_search as ss
+    from ema_cli.identify.closed_loop import shooting_fit as sf
+    from ema_cli.identify.closed_loop import shooting_lengthen as sl
+    from ema_cli.identify.closed_loop import shooting_search as ss
 
     problem, x, sp = _at_truth({"kL": 650.0, "alpha": 0.002, "Fc": 0.04, "sigma2": 0.01}, 4,
                                1.0, 0.5)
@@ -618,7 +618,7 @@ def test_when_the_longest_segments_do_not_fit_the_estimate_falls_back_to_the_anc
     no longer fit the log to its noise: the anchor is refined and is the estimate
     (``fell_back_from_longest_segments``), on its own 10 segments, confirmed, kL within 1 %
     of the truth; without the spoiling the same fit keeps the 0.2 s segments."""
-    import ema_cli.identify.shooting_fit as sf
+    import ema_cli.identify.closed_loop.shooting_fit as sf
 
     real = sf.continue_at
     calls = []

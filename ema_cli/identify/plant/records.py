@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.log_files import LogTable, read_log_table
+from ema_cli.identify.logs.channels import LogTable, read_log_table
 
 UNIFORM_TOL = 0.01  # a sample interval may differ from the mean by 1 % (EMPS: 2e-5) [-]
 SATURATED_MAX_SHARE = 0.5  # most of the record at the actuation's limit is refused [-]

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from ema_cli._numba import njit
-from ema_cli.identify.problem import TorqueProblem
+from ema_cli.identify.torque.problem import TorqueProblem
 from ema_cli.model.transmission import inverse_tau, shaft_torque_nb
 
 GRID_POINTS = 201  # alpha grid of the profile over the search range [points]

@@ -109,7 +109,7 @@ SWEEP_RPM = (1.0, 1000.0, 20)  # default sweep: 20 log-spaced speeds per directi
 def friction_sweep_log(plant: Mapping[str, Any], noise_pct: float, seed: int, *,
                        speeds_rpm: tuple[float, float, int] = SWEEP_RPM) -> SyntheticLog:
     """A friction sweep from the model's static curve (see the module docstring)."""
-    from ema_cli.identify.friction_sweep import static_curve
+    from ema_cli.identify.friction.sweep import static_curve
 
     params = resolve_truth(plant)
     lo, hi, n = speeds_rpm

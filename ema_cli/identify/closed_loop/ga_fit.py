@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.closed_loop import (
+from ema_cli.identify.closed_loop.problem import (
     CHANNELS,
     CONTACT_SHAPE,
     NOISE_NOTE,
@@ -42,10 +42,10 @@ from ema_cli.identify.closed_loop import (
     check_free,
     load_log,
 )
+from ema_cli.identify.closed_loop.shooting_fit import ShootingOutcome, shooting_estimate, too_high
+from ema_cli.identify.closed_loop.whole_log import FD_REL_STEP, fd_jacobian, polish
 from ema_cli.identify.log_settings import ClosedLoopSettings
-from ema_cli.identify.shooting_fit import ShootingOutcome, shooting_estimate, too_high
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance
-from ema_cli.identify.whole_log import FD_REL_STEP, fd_jacobian, polish
 from ema_cli.model.params import BY_NAME
 from ema_cli.optim.ga import GAHistory, preset, run_ga
 from ema_cli.progress import report

@@ -1,4 +1,5 @@
-"""Multiple shooting on longer segments (:mod:`ema_cli.identify.shooting_fit`, steps 2-3):
+"""Multiple shooting on longer segments (:mod:`ema_cli.identify.closed_loop.shooting_fit`, steps
+2-3):
 the best start and the runner-up continued on longer segments (fewer free states, less of
 their bias), the refinement at another step, and the estimate's segments cut into parts for
 its covariance when there are too few of them."""
@@ -11,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.shooting_quality import CONFIRM_RATIO, channel_ratios, too_high
-from ema_cli.identify.shooting_search import (
+from ema_cli.identify.closed_loop.shooting_quality import CONFIRM_RATIO, channel_ratios, too_high
+from ema_cli.identify.closed_loop.shooting_search import (
     AGREE_REL,
     RESEAT_RATIO,
     ShootingSearch,
@@ -58,7 +59,7 @@ def _reseat_on(res: ShootingSearch, seg: Any, dt: float, sweeps: int | None = No
     of the old segment that started at or before its first sample, then chained
     (:func:`chain_seat`, ``sweeps`` of them) -> (the new problem, its scaled unknowns, their
     data cost)."""
-    from ema_cli.identify.shooting import ShootingProblem
+    from ema_cli.identify.closed_loop.shooting import ShootingProblem
 
     sp = res.sp
     sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie)
@@ -85,7 +86,7 @@ def lengthened(res: ShootingSearch, length: float, dt: float, iterations: int,
     incidental-parameter problem), but a longer horizon is harder to seat. Returns the LM
     iterations used (0: skipped, as when fewer than :data:`MIN_FIT_SEGMENTS` segments would
     be left)."""
-    from ema_cli.identify.shooting import make_segments
+    from ema_cli.identify.closed_loop.shooting import make_segments
 
     sp = res.sp
     seg = make_segments(sp.base.log.t, length)
@@ -119,8 +120,8 @@ def split_for_covariance(res: ShootingSearch, dt: float, iterations: int = 4
     shorter segments' estimator (more free states, so no narrower than the longer
     segments'), evaluated at the estimate, with the clusters' scores taken at the parts' own
     (linearised) optimum (:func:`ema_cli.identify.uncertainty.covariance_clustered`)."""
-    from ema_cli.identify.shooting import Segments
-    from ema_cli.identify.shooting_seat import fit_states
+    from ema_cli.identify.closed_loop.shooting import Segments
+    from ema_cli.identify.closed_loop.shooting_seat import fit_states
 
     sp = res.sp
     if sp.seg.n >= MIN_SEGMENTS:

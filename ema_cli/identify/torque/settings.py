@@ -23,7 +23,7 @@ from ema_cli.config.base import (
 )
 from ema_cli.config.run import KEY_MARK
 from ema_cli.errors import EmaError
-from ema_cli.identify.data import CSV_COLUMNS
+from ema_cli.identify.torque.data import CSV_COLUMNS
 from ema_cli.model.params import check_value
 from ema_cli.optim import ga as ga_mod
 

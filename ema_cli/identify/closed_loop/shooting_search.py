@@ -1,5 +1,6 @@
-"""The search of the multiple-shooting fit (:mod:`ema_cli.identify.shooting`): segment states
-seated (:mod:`ema_cli.identify.shooting_seat`), then Levenberg-Marquardt on
+"""The search of the multiple-shooting fit (:mod:`ema_cli.identify.closed_loop.shooting`): segment
+states
+seated (:mod:`ema_cli.identify.closed_loop.shooting_seat`), then Levenberg-Marquardt on
 the free parameters and every segment state together, many starts at once (one kernel call per
 Jacobian and per round of trial steps), with successive halving of the starts.
 """
@@ -11,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import ClosedLoopProblem
-from ema_cli.identify.shooting import ShootingProblem
-from ema_cli.identify.shooting_seat import (
+from ema_cli.identify.closed_loop.problem import ClosedLoopProblem
+from ema_cli.identify.closed_loop.shooting import ShootingProblem
+from ema_cli.identify.closed_loop.shooting_seat import (
     chain_seat,
     fit_states,
     reconstruct,
@@ -235,7 +236,7 @@ def build(problem: ClosedLoopProblem, segment_s: float, x_mid: np.ndarray, tie: 
     """The multiple-shooting problem of ``problem`` with segments of about ``segment_s`` [s];
     the state scales from a reconstruction of the whole log at parameters ``x_mid``; ``tie``:
     the motor-angle tie (:meth:`ShootingProblem.tie_data`)."""
-    from ema_cli.identify.shooting import make_segments, state_scales
+    from ema_cli.identify.closed_loop.shooting import make_segments, state_scales
 
     seg = make_segments(problem.log.t, segment_s)
     guess = reconstruct(problem, x_mid, np.arange(problem.log.n))

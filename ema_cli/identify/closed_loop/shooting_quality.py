@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import FLOOR_NOTE, NOISE_NOTE, ClosedLoopProblem
+from ema_cli.identify.closed_loop.problem import FLOOR_NOTE, NOISE_NOTE, ClosedLoopProblem
 
 NOISE_LEVEL_RATIO = 2.0  # a channel fits when its residual RMS is within this x its noise [-]
 CONFIRM_RATIO = 1.2

@@ -1,7 +1,8 @@
 """The closed-loop fit by multiple shooting (the default search of ``ema identify
 --closed-loop``): search, uncertainty, whole-log polish and the verdict on the optimum.
 
-1. :func:`ema_cli.identify.shooting_search.search`: the log cut into segments, many starts
+1. :func:`ema_cli.identify.closed_loop.shooting_search.search`: the log cut into segments, many
+starts
    over the bounds, joint Levenberg-Marquardt on parameters and segment states.
 2. Uncertainty of the multiple-shooting estimate: the segment states profiled out (each
    segment's parameter Jacobian projected off its own state directions) and a cluster-robust
@@ -43,14 +44,14 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import ClosedLoopProblem
-from ema_cli.identify.shooting_lengthen import (
+from ema_cli.identify.closed_loop.problem import ClosedLoopProblem
+from ema_cli.identify.closed_loop.shooting_lengthen import (
     Lengthening,
     continue_at,
     lengthen_both,
     split_for_covariance,
 )
-from ema_cli.identify.shooting_quality import (
+from ema_cli.identify.closed_loop.shooting_quality import (
     AT_NOISE_RATIO,
     CONFIRM_RATIO,
     JUDGED_NOTES,
@@ -59,9 +60,9 @@ from ema_cli.identify.shooting_quality import (
     mismatch_text,
     too_high,
 )
-from ema_cli.identify.shooting_search import ShootingSearch, search
+from ema_cli.identify.closed_loop.shooting_search import ShootingSearch, search
+from ema_cli.identify.closed_loop.whole_log import polish
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
-from ema_cli.identify.whole_log import polish
 
 BOUND_FRACTION = 1e-6  # a parameter within this fraction of its range from a bound sits on it
 

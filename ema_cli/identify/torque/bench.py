@@ -11,9 +11,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ema_cli.identify.exact import solve_exact
-from ema_cli.identify.run import build_problem, load_data, run_identification
-from ema_cli.identify.settings import IdentifySettings
+from ema_cli.identify.torque.exact import solve_exact
+from ema_cli.identify.torque.run import build_problem, load_data, run_identification
+from ema_cli.identify.torque.settings import IdentifySettings
 from ema_cli.optim.ga import preset, run_ga
 from ema_cli.timing import median_time
 

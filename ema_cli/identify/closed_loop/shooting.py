@@ -31,7 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import CHANNELS, ON_GRID_TOL, OVERSAMPLE, ClosedLoopProblem
+from ema_cli.identify.closed_loop.problem import (
+    CHANNELS,
+    ON_GRID_TOL,
+    OVERSAMPLE,
+    ClosedLoopProblem,
+)
 from ema_cli.model.params import INDEX, to_row
 
 SEGMENT_STATES = ("theta_m", "w_m", "i", "theta_L", "w_L", "z", "xI")

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import ClosedLoopProblem
+from ema_cli.identify.closed_loop.problem import ClosedLoopProblem
 
 FD_REL_STEP = 1e-4  # central-difference step, relative to max(|x|, 1e-3*(hi - lo)) [-]
 POLISH_TOL = 1e-10  # xtol/ftol/gtol of the least-squares polish [-]

@@ -18,16 +18,16 @@ import numpy as np
 import pandas as pd
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.data import (
+from ema_cli.identify.torque.data import (
     MIN_CONTACT_SAMPLES,
     IdentData,
     check_exercises_gap,
     load_csv,
     synthetic_data,
 )
-from ema_cli.identify.exact import ExactResult, profile, solve_exact
-from ema_cli.identify.problem import PARAM_UNITS, TorqueProblem
-from ema_cli.identify.settings import IdentifySettings
+from ema_cli.identify.torque.exact import ExactResult, profile, solve_exact
+from ema_cli.identify.torque.problem import PARAM_UNITS, TorqueProblem
+from ema_cli.identify.torque.settings import IdentifySettings
 from ema_cli.model.params import CONTACT_TAU
 from ema_cli.optim.ga import GAHistory, GAOptions, run_ga
 from ema_cli.units import DEG

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 from ema_cli.errors import EmaError
-from ema_cli.identify.friction_sweep import read_truth
-from ema_cli.identify.log_files import read_log
+from ema_cli.identify.friction.sweep import read_truth
+from ema_cli.identify.logs.channels import read_log
 from ema_cli.model.params import BY_NAME, resolve, to_row
 from ema_cli.units import DEG, RPM
 
@@ -95,7 +95,8 @@ class ClosedLoopLog:
 
 def load_log(path: str | Path, *, columns: Mapping[str, str] | None = None,
              window: Sequence[float] | None = None) -> ClosedLoopLog:
-    """Read and validate a closed-loop log: CSV, Parquet or MATLAB .mat (``identify.log_files``),
+    """Read and validate a closed-loop log: CSV, Parquet or MATLAB .mat
+    (``identify.logs.channels``),
     its columns found through the map ``columns`` (channel -> ``COLUMN[:UNIT]``), only the
     samples with ``window[0] <= t <= window[1]`` [s, the log's own time] kept. Errors name the
     file, the column and the line (CSV), row (Parquet) or index (MATLAB): missing columns,

@@ -1,4 +1,5 @@
-"""Seating the segment states of the multiple-shooting fit (:mod:`ema_cli.identify.shooting`):
+"""Seating the segment states of the multiple-shooting fit
+(:mod:`ema_cli.identify.closed_loop.shooting`):
 states reconstructed from the measured channels (local fits of the logged signals), fitted
 segment by segment (batched Levenberg-Marquardt on the states alone, from starts across the
 gap), and chained (each segment restarted from its predecessor's simulated end where that fits
@@ -9,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ema_cli.identify.closed_loop import ClosedLoopProblem
-from ema_cli.identify.shooting import (
+from ema_cli.identify.closed_loop.problem import ClosedLoopProblem
+from ema_cli.identify.closed_loop.shooting import (
     FAILED,
     N_X,
     NV,

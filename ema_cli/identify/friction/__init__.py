@@ -1,0 +1,1 @@
+"""Friction laws from constant-speed sweeps."""
