@@ -18,7 +18,7 @@ PIPI    := $(BIN)/python -m pip install -q --require-hashes --no-deps
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci yield-ci design-ci clean \
+.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci yield-ci design-ci duty-ci clean \
         lock upgrade compile
 
 help:  ## list the targets
@@ -56,7 +56,7 @@ test: $(TSTAMP)  ## lint, undeclared imports (deptry), the fast tier of the test
 test-all: test  ## make test, then the slow tier (cold compiles, long end-to-end checks)
 	$(BIN)/python -m pytest -n auto -m slow
 
-bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, yield, the identification battery (hours)
+bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, yield, duty, the identification battery (hours)
 	$(BIN)/python experiments/bench_compile.py
 	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
@@ -64,6 +64,7 @@ bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep,
 	$(BIN)/python experiments/bench_acceptance.py
 	rm -rf results/bench/yield-1000
 	$(BIN)/python experiments/bench_yield.py --out results/bench/yield-1000
+	$(BIN)/python experiments/bench_duty.py
 	$(BIN)/python experiments/bench_identify_logs.py
 	$(BIN)/python -m experiments.loggen.battery --out results/battery/logs --n 20 --seed 2026 --jobs 2
 	$(BIN)/python experiments/identify_battery.py --battery results/battery/logs --out results/battery/fits
@@ -92,6 +93,11 @@ yield-ci: $(STAMP)  ## ema yield of the reference battery at a small N, its clai
 	rm -rf results/yield-ci
 	$(EMA) yield configs/acceptance.yaml --tolerances configs/tolerances.yaml --n 32 --seed 0 \
 	  --worst-budget 16 --min-yield 0.25 --out results/yield-ci
+
+duty-ci: $(STAMP)  ## ema duty on the bundled 8.6 h TVC profile and its acceptance test (replaces results/duty-ci)
+	rm -rf results/duty-ci
+	$(EMA) duty configs/duty/tvc.yaml --out results/duty-ci/tvc
+	$(EMA) acceptance configs/acceptance_duty.yaml --out results/duty-ci/acceptance
 
 design-ci: $(STAMP)  ## ema design on the bundled log, small budget (replaces results/design-ci)
 	rm -rf results/design-ci
