@@ -4,6 +4,8 @@ tolerances in ``ema yield``."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -83,6 +85,7 @@ def test_the_acceptance_duty_kind_judges_the_winding_as_ema_duty_measures_it() -
         assert v.value == pytest.approx(peak, abs=0.01)
 
 
+@pytest.mark.slow
 def test_thermal_tolerances_reach_each_unit_in_yield() -> None:
     """Only the ambient varies (sd 5 K): each unit's winding temperature is what the battery
     gives one actuator at that unit's ambient (to 1e-6 K: the units share the blocks' kernel
@@ -98,3 +101,27 @@ def test_thermal_tolerances_reach_each_unit_in_yield() -> None:
         assert row[col] == pytest.approx(v.value, abs=1e-6)
     order = np.argsort(s["plant.T_amb"].to_numpy())
     assert np.all(np.diff(s[col].to_numpy()[order]) > 0)
+
+
+@pytest.mark.slow
+def test_the_hot_actuator_is_the_battery_run_at_the_hot_resistance() -> None:
+    """The hot check's resistance is R0 (1 + alpha (T_peak - T_ref)) (by hand here), and its
+    bandwidth and no-load rate are what the acceptance battery measures on an actuator given
+    that resistance; hot, the no-load rate is lower (less voltage left over R i)."""
+    r = duty(SHORT, hot=True)
+    h, p = r.run.hot, resolve()
+    assert h is not None
+    peak = r.run.thermal.peak_w
+    r_hot = p["R"] * (1 + p["alpha_cu"] * (peak - p["T_ref"]))
+    assert h.r_hot == pytest.approx(r_hot, rel=1e-12)
+    assert h.r_hot > 1.15 * h.r_cold  # 89 degC against 40 degC
+    spec = {"name": "hot", "actuator": {"config": None, "plant": {"R": r_hot}},
+            "tests": {"bw": {"test": "frequency_response", "amplitudes_deg": [1.0],
+                             "f_min_hz": 0.5, "f_max_hz": 50.0, "n": 16,
+                             "limits": {"bandwidth": {"min": 0, "unit": "Hz"}}},
+                      "rate": {"test": "no_load_rate", "amplitude_deg": 40.0, "duration_s": 1.0,
+                               "limits": {"rate": {"min": 0, "unit": "deg/s"}}}}}
+    acc = {v.metric: v.value for v in acceptance(spec).verdicts}
+    assert h.bandwidth[1].value == pytest.approx(acc["bandwidth"], rel=1e-9)
+    assert math.degrees(h.rate[1].value) == pytest.approx(acc["rate"], rel=1e-9)
+    assert h.rate[1].value < h.rate[0].value
