@@ -5,6 +5,7 @@ tolerances in ``ema yield``."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -125,3 +126,44 @@ def test_the_hot_actuator_is_the_battery_run_at_the_hot_resistance() -> None:
     assert h.bandwidth[1].value == pytest.approx(acc["bandwidth"], rel=1e-9)
     assert math.degrees(h.rate[1].value) == pytest.approx(acc["rate"], rel=1e-9)
     assert h.rate[1].value < h.rate[0].value
+
+
+def _described(tmp_path, thermal: dict) -> Path:
+    import yaml
+
+    base = yaml.safe_load((Path(__file__).resolve().parents[2] / "configs" / "actuators"
+                           / "paper_ema.yaml").read_text())
+    base["drive"] = {**base["drive"], "thermal": thermal}
+    f = tmp_path / "act.yaml"
+    f.write_text(yaml.safe_dump(base))
+    return f
+
+
+def test_a_described_thermal_element_is_read_in_its_units(tmp_path) -> None:
+    """drive.thermal in datasheet units: a time constant becomes a capacity (tau/R_th), the
+    ambient in degC, class H's 180 degC the default limit; the held load settles at
+    T_a + P (R_wh + R_ha) with P at the hot resistance (the closed form of the R(T) test)."""
+    f = _described(tmp_path, {"rth_winding_housing": "1.0 K/W", "rth_housing_ambient": "3 K/W",
+                              "tau_winding": "20 s", "cth_housing": "300 J/K",
+                              "ambient": "25 degC", "insulation": "H", "friction_share": 0})
+    r = duty(_hold({}, 15000.0), f, hot=False)  # 15 slow time constants (961 s)
+    p = r.run.params
+    assert (p["Cth_w"], p["Cth_h"], p["T_amb"]) == pytest.approx((20.0, 300.0, 298.15))
+    assert r.limits.winding_k == pytest.approx(180.0 + ZERO_C)
+    i2, r0, a = _current(p) ** 2, p["R"], p["alpha_cu"]
+    theta = i2 * r0 * (1 + a * (p["T_amb"] - p["T_ref"])) * 4.0 / (1 - i2 * r0 * a * 4.0)
+    assert r.run.thermal.peak_w - p["T_amb"] == pytest.approx(theta, abs=0.05)
+
+
+@pytest.mark.parametrize(("thermal", "needle"), [
+    ({"rth_winding_housing": "-1 K/W"}, "drive.thermal.rth_winding_housing: must be > 0"),
+    ({"rth_winding_housing": "1 ohm"}, "drive.thermal.rth_winding_housing: unit 'ohm'"),
+    ({"insulation": "Z"}, "drive.thermal.insulation: expected a class"),
+    ({"tau_winding": "20 s", "cth_winding": 3}, "give cth_winding or tau_winding, not both"),
+    ({"colour": 1}, "drive.thermal.colour: unknown key")])
+def test_a_bad_thermal_element_is_one_line(tmp_path, thermal, needle) -> None:
+    from ema_cli.errors import EmaError
+
+    with pytest.raises(EmaError) as exc:
+        duty(_hold({}), _described(tmp_path, thermal), hot=False)
+    assert needle in str(exc.value) and "\n" not in str(exc.value)
