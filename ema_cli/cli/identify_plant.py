@@ -98,6 +98,8 @@ def _print(ident: Any, folder: Path) -> None:
                       + "; ".join(f"{k}: force {d['force']:.4g} %" for k, d in s.items()))
     if ident.validation is not None:
         v = ident.validation
+        for note in v.notes:
+            console.print(f"note: {note}")
         console.print(f"validation on {v.record.source}: " + "; ".join(
             f"{k}: force {d.force_pct:.4g} %" + (
                 f", RMS position {v.rms_position_m[k] * 1e6:.4g} um" if v.controller else "")
@@ -188,6 +190,8 @@ def _validate(folder: Path, data: Path, columns: list[str] | None) -> None:
     console.print(f"validation on {v.record.source} ({v.record.n} samples); " + (
         f"controller check: {v.controller.summary()}" if v.controller is not None else
         "inverse model: the force predicted from the measured motion"))
+    for note in v.notes:
+        console.print(f"note: {note}")
     for k, e in v.errors.items():
         d = e.as_dict()
         if v.controller is None:

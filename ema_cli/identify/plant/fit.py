@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ from ema_cli.identify.plant import adequacy as adq
 from ema_cli.identify.plant import output_error as oe
 from ema_cli.identify.plant.benchmark import BenchmarkErrors, relative_error_pct
 from ema_cli.identify.plant.controller_check import (
+    MATCH_MAX,
     ControllerCheck,
     check_controller,
     chosen_delay,
@@ -503,6 +504,7 @@ class PlantValidation:
     errors: dict[str, BenchmarkErrors]
     rms_position_m: dict[str, float]
     sims: dict[str, dict[str, np.ndarray]]
+    notes: list[str] = field(default_factory=list)
 
 
 def validate(fit: PlantFit, data: str | Path, columns: Mapping[str, str] | None = None
@@ -549,7 +551,25 @@ def validate_models(settings: PlantSettings, delay: int, models: Mapping[str, Ma
     first = BENCHMARK.first_sample
     check = check_controller(prm, record.q_m, record.reference_m, extras["actuation"],
                              extras["unit"], extras.get("disturbance"), first=first)
-    chosen_delay(check, delay, record.source)
+    notes = []
+    if extras.get("unused"):
+        notes.append(f"{record.source} has variables the column map does not use: "
+                     f"{', '.join(extras['unused'][:8])} (a logged disturbance is mapped with "
+                     "--columns disturbance=NAME[:UNIT])")
+    if check.rel_rms[delay] > MATCH_MAX and extras.get("disturbance") is None:
+        # the same axis and controller (checked on the fitted record): what the log adds to
+        # the law's output is an input of its own (pulses, a feedforward), applied as logged
+        from ema_cli.identify.plant.controller_check import apply_law
+
+        law = apply_law({**prm, "dc_delay": float(delay)}, record.q_m, record.reference_m,
+                        delay)
+        d = extras["actuation"] - law
+        d[:first] = 0.0
+        extras = {**extras, "disturbance": d}
+        notes.append(f"the logged command departs from the described law by "
+                     f"{100 * check.rel_rms[delay]:.3g} % RMS (largest {check.worst_abs:.3g} "
+                     f"{check.unit} at index {check.worst_index}): the difference is applied as "
+                     "a disturbance added to the controller's output, as the log records it")
     idx = np.arange(first, record.n)
     out, rms, sims = {}, {}, {}
     for name, est in models.items():
@@ -559,4 +579,4 @@ def validate_models(settings: PlantSettings, delay: int, models: Mapping[str, Ma
         out[name] = benchmark_errors_on(record, idx, q, v, a, F)
         rms[name] = float(np.sqrt(np.mean((q[idx] - record.q_m[idx]) ** 2)))
         sims[name] = {"F": F, "q": q, "v": v, "a": a}
-    return PlantValidation(record, check, out, rms, sims)
+    return PlantValidation(record, check, out, rms, sims, notes)
