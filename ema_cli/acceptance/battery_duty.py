@@ -31,7 +31,7 @@ def insulation_k(word: str) -> float:
 
 def run_duty(name: str, test: DutyTest, units: Sequence[Mapping[str, float]],
              dt: float) -> list[TestRun]:
-    from ema_cli.duty.run import Limits, run_units
+    from ema_cli.acceptance.duty.run import Limits, run_units
 
     prof = test.load_profile()
     class_k = insulation_k(test.insulation)

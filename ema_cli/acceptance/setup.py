@@ -52,7 +52,7 @@ def test_setups(sp: AcceptanceSpec, names: Sequence[str],
 def _check_profile(name: str, test: Any, folder: Path | None, setup: Setup) -> None:
     """A duty test's profile, read relative to the spec and expanded on the test's actuator
     (every key checked before any simulation): EmaError naming the test."""
-    from ema_cli.duty.profile import expand
+    from ema_cli.acceptance.duty.profile import expand
 
     test.bind(folder)
     try:

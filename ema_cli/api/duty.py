@@ -14,11 +14,11 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
+    from ema_cli.acceptance.duty.profile import Expanded
+    from ema_cli.acceptance.duty.reference import Reference
+    from ema_cli.acceptance.duty.run import DutyRun, Limits
     from ema_cli.acceptance.verdict import Verdict
     from ema_cli.config.duty import DutyProfile
-    from ema_cli.duty.profile import Expanded
-    from ema_cli.duty.reference import Reference
-    from ema_cli.duty.run import DutyRun, Limits
 
 ACTUATOR_KEYS = {"axis", "ratio", "transmission", "motor", "drive", "friction", "sensors",
                  "disturbance"}
@@ -61,6 +61,14 @@ class DutyResult:
         from ema_cli.acceptance.verdict import EXIT_CODES
 
         return EXIT_CODES[self.verdict]
+
+    def hot_summary(self) -> dict[str, Any] | None:
+        """The hot check in edge units (degC, Hz, deg/s), cold beside hot; None when skipped."""
+        if self.run.hot is None:
+            return None
+        from ema_cli.acceptance.duty.hot import as_dict
+
+        return as_dict(self.run.hot)
 
     @property
     def title(self) -> str:
@@ -182,8 +190,8 @@ def _actuator(prof: Any, profile: ConfigSource, actuator: str | Path | None
 def limits_of(prof: Any, cfg: Any) -> tuple[Limits, str]:
     """The winding limit, class temperature and insulation life of ``prof`` on the actuator
     of run config ``cfg`` -> (limits, where the thermal element came from)."""
+    from ema_cli.acceptance.duty.run import Limits, winding_limit
     from ema_cli.config.thermal import DEFAULT_CLASS, thermal_of
-    from ema_cli.duty.run import Limits, winding_limit
     from ema_cli.model.thermal import INSULATION_CLASSES
     from ema_cli.units import ZERO_CELSIUS
 
@@ -228,8 +236,8 @@ def duty(profile: ConfigSource, actuator: str | Path | None = None,
     profile at the mechanical step: minutes per hour of profile)."""
     import time
 
+    from ema_cli.acceptance.duty.run import run_units
     from ema_cli.api._inputs import callable_arg, flag_arg
-    from ema_cli.duty.run import run_units
 
     full_resolution = flag_arg(full_resolution, "full_resolution")
     hot = flag_arg(hot, "hot")
@@ -242,7 +250,7 @@ def duty(profile: ConfigSource, actuator: str | Path | None = None,
     run = runs[0]
     ref = None
     if full_resolution:
-        from ema_cli.duty.reference import full_resolution as brute
+        from ema_cli.acceptance.duty.reference import full_resolution as brute
 
         ref = brute(exp, params, dt,
                     None if progress is None else lambda f: progress("full resolution",

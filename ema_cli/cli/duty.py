@@ -41,10 +41,8 @@ def _summary_rows(res: Any) -> list[list[str]]:
     rows.append(["insulation life used", f"{100 * th.life_h / res.limits.insulation_life_h:.3g}"
                                          " % per pass (10 K rule)"])
     rows.append(["energy per pass", f"{st.energy / 3600:.4g} Wh"])
-    if run.hot is not None:
-        from ema_cli.duty.hot import as_dict
-
-        h = as_dict(run.hot)
+    h = res.hot_summary()
+    if h is not None:
         bw, rt = h["bandwidth_hz"], h["no_load_rate_deg_s"]
         rows.append(["bandwidth cold / hot", f"{fmt_num(bw['cold']['value'])} / "
                                              f"{fmt_num(bw['hot']['value'])} Hz (1 deg)"])

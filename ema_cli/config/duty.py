@@ -31,7 +31,6 @@ from typing import Any, ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from ema_cli.config.acceptance import DUTY_METRICS, ActuatorSpec, Limit
 from ema_cli.config.base import (
     FiniteFloat,
     PlainName,
@@ -39,6 +38,7 @@ from ema_cli.config.base import (
     Strict,
     tagged_union,
 )
+from ema_cli.config.limits import DUTY_METRICS, ActuatorSpec, Limit
 from ema_cli.config.run import KEY_MARK
 from ema_cli.units import units_of
 

@@ -177,8 +177,8 @@ def envelope_figure(res: Any) -> Figure:
 
 def summary(res: Any) -> dict[str, Any]:
     """duty.json's body (edge units, named)."""
-    from ema_cli.duty.hot import as_dict
-    from ema_cli.duty.run import describe
+    from ema_cli.acceptance.duty.hot import as_dict
+    from ema_cli.acceptance.duty.run import describe
 
     th, st = res.run.thermal, res.run.stats
     out: dict[str, Any] = {
@@ -261,7 +261,7 @@ def duty_markdown(res: Any) -> str:
         del extra
     lines += [_md(brows), ""]
     if res.run.hot is not None:
-        from ema_cli.duty.hot import as_dict
+        from ema_cli.acceptance.duty.hot import as_dict
 
         h = as_dict(res.run.hot)
         bw, rt = h["bandwidth_hz"], h["no_load_rate_deg_s"]

@@ -10,11 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ema_cli.acceptance.duty.thermal import Network
 from ema_cli.api.acceptance import acceptance
 from ema_cli.api.duty import duty
 from ema_cli.api.production import production_yield
-from ema_cli.duty.thermal import Network
 from ema_cli.model.params import resolve
+from tests.helpers.thermal import closed_form as _closed_form
 
 ZERO_C = 273.15
 LOAD = 9.6  # held on the output [N*m]: 9.6/(24*0.08) = 5 A in the reference EMA's winding
@@ -34,8 +35,6 @@ def test_holding_a_load_matches_the_two_node_closed_form() -> None:
     """A dwell holding 9.6 N*m (5 A, 12.5 W at alpha 0, no friction heat) for 10 slow time
     constants: every trace row within 0.01 K of the two-node step response written out in
     tests/unit/test_duty_thermal.py (the current from the ratio and Kt, not the simulation)."""
-    from tests.unit.test_duty_thermal import _closed_form
-
     r = duty(_hold({"alpha_cu": 0.0, "fric_heat": 0.0}), hot=False)
     p = resolve()
     power = _current(p) ** 2 * p["R"]

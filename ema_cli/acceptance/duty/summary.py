@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 
+from ema_cli.acceptance.duty.mechanics import PERIODIC_TOL, BlockRun
+from ema_cli.acceptance.duty.profile import Expanded
+from ema_cli.acceptance.duty.thermal import Network, Thermal, integrate
 from ema_cli.acceptance.measurement import Measurement
-from ema_cli.duty.mechanics import PERIODIC_TOL, BlockRun
-from ema_cli.duty.profile import Expanded
-from ema_cli.duty.thermal import Network, Thermal, integrate
 from ema_cli.units import SI_UNIT
 
 LIFE_REVS = 1e6  # revolutions a basic dynamic load rating is defined for (ISO 281) [-]

@@ -12,13 +12,13 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ema_cli.acceptance.duty.hot import HotCheck
+from ema_cli.acceptance.duty.mechanics import BlockRun, simulate_blocks
+from ema_cli.acceptance.duty.profile import Expanded, expand
+from ema_cli.acceptance.duty.summary import Stats, current_margin, measurements, stats
+from ema_cli.acceptance.duty.thermal import Network, Thermal, integrate
 from ema_cli.acceptance.measurement import Measurement
 from ema_cli.config.duty import DutyProfile
-from ema_cli.duty.hot import HotCheck
-from ema_cli.duty.mechanics import BlockRun, simulate_blocks
-from ema_cli.duty.profile import Expanded, expand
-from ema_cli.duty.summary import Stats, current_margin, measurements, stats
-from ema_cli.duty.thermal import Network, Thermal, integrate
 from ema_cli.errors import EmaError
 from ema_cli.model.thermal import continuous_current
 
@@ -113,7 +113,7 @@ def run_units(prof: DutyProfile, units: Sequence[Mapping[str, float]], dt: float
                 run.notes.append("hot check skipped: the acceptance battery's frequency "
                                  "response reports a rotary axis")
             else:
-                from ema_cli.duty.hot import hot_check
+                from ema_cli.acceptance.duty.hot import hot_check
 
                 run.hot = hot_check(p, min(b.ambient_k for b in e.blocks), th.peak_w, dt)
             run.timings["hot_s"] = time.perf_counter() - t2
@@ -124,7 +124,7 @@ def run_units(prof: DutyProfile, units: Sequence[Mapping[str, float]], dt: float
 def profile_seconds(prof: DutyProfile, dt: float) -> float:
     """The simulated seconds of the profile's block windows for one actuator at two
     resistances (what the acceptance battery's step estimate needs) [s]."""
-    from ema_cli.duty.mechanics import window
+    from ema_cli.acceptance.duty.mechanics import window
 
     try:
         exp = expand(prof, "rotary", 313.15, dt)

@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ema_cli._numba import njit
-from ema_cli.duty.mechanics import BlockRun, Piece
-from ema_cli.duty.profile import Expanded
+from ema_cli.acceptance.duty.mechanics import BlockRun, Piece
+from ema_cli.acceptance.duty.profile import Expanded
 from ema_cli.model.thermal import flow_nb, time_constants
 
 CYCLE_RATIO = 0.05  # a cycle is averaged when its period is at most this share of tau_fast [-]

@@ -2,9 +2,11 @@
 (bandwidth) and no-load rate with the winding resistance at the profile's peak winding
 temperature, R(T_peak) = R0 (1 + alpha (T_peak - T_ref)), against R at the ambient.
 
-The two actuators run in the same kernel batches (``acceptance.kinds.run_units``), every other
-parameter the same: what heating alone does to the servo's speed of response. An actuator the
-battery cannot run (a translational axis reports in other units) is skipped with a note.
+The two actuators run in the same kernel batches (the battery's runners,
+``acceptance.battery_sweeps.run_frequency_response`` and ``acceptance.battery.run_no_load_rate``),
+every other parameter the same: what heating alone does to the servo's speed of response. An
+actuator the battery cannot run (a translational axis reports in other units) is skipped with a
+note.
 """
 
 from __future__ import annotations
@@ -39,7 +41,8 @@ def hot_check(p: Mapping[str, float], ambient_k: float, peak_k: float, dt: float
               ) -> HotCheck:
     """The cold (``R(ambient_k)``) and hot (``R(peak_k)``) actuator's bandwidth at
     :data:`AMPLITUDE_DEG` and no-load rate on a :data:`RATE_STEP_DEG` step."""
-    from ema_cli.acceptance.kinds import run_units
+    from ema_cli.acceptance.battery import run_no_load_rate
+    from ema_cli.acceptance.battery_sweeps import run_frequency_response
     from ema_cli.config.acceptance import FrequencyResponseTest, NoLoadRateTest
     from ema_cli.model.params import resolve
     from ema_cli.model.thermal import resistance_nb
@@ -58,8 +61,8 @@ def hot_check(p: Mapping[str, float], ambient_k: float, peak_k: float, dt: float
     nl = NoLoadRateTest.model_validate(
         {"test": "no_load_rate", "amplitude_deg": RATE_STEP_DEG, "duration_s": RATE_S,
          "limits": {"rate": {"min": 0, "unit": "deg/s"}}})
-    bw = [r.values("bandwidth")[0] for r in run_units("hot-bandwidth", fr, units, dt)]
-    rate = [r.values("rate")[0] for r in run_units("hot-rate", nl, units, dt)]
+    bw = [r.values("bandwidth")[0] for r in run_frequency_response("hot-bandwidth", fr, units, dt)]
+    rate = [r.values("rate")[0] for r in run_no_load_rate("hot-rate", nl, units, dt)]
     return HotCheck(rs[0], rs[1], ambient_k, peak_k, (bw[0], bw[1]), (rate[0], rate[1]))
 
 

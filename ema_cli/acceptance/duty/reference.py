@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ema_cli.duty.mechanics import rest_state
-from ema_cli.duty.profile import Expanded
+from ema_cli.acceptance.duty.mechanics import rest_state
+from ema_cli.acceptance.duty.profile import Expanded
 from ema_cli.errors import EmaError
 
 MAX_TABLE = 10_000_000  # rows of the position table, at most [-]

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ema_cli.duty.profile import Block, Expanded
+from ema_cli.acceptance.duty.profile import Block, Expanded
 from ema_cli.errors import EmaError
 
 RECORD_S = 1e-4  # recording interval of the block simulations [s]
