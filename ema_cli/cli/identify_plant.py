@@ -152,7 +152,7 @@ def _plant(data: Path, actuator: Path, config: Path | None, columns: list[str] |
            free: list[str] | None = None) -> None:
     from ema_cli.api.identify_plant import PlantIdentification, plant_inputs, plant_settings
     from ema_cli.identify.plant.fit import run_plant
-    from ema_cli.identify.plant.fit import validate as validate_fit
+    from ema_cli.identify.plant.validation import validate as validate_fit
     from ema_cli.report.rundir import check_output
 
     pairs = [("data", str(data)), ("actuator", str(actuator)),

@@ -18,7 +18,8 @@ from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import manifest, write_columns, write_figure, write_json, write_text
 
 if TYPE_CHECKING:
-    from ema_cli.identify.plant.fit import LawFit, PlantFit, PlantValidation
+    from ema_cli.identify.plant.fit import LawFit, PlantFit
+    from ema_cli.identify.plant.validation import PlantValidation
 
 TERM_UNITS = {
     "translational": {"M": "kg", "Fv": "N*s/m", "Fc": "N", "OF": "N"},

@@ -128,15 +128,16 @@ def test_closed_loop_both_spellings_reach_the_api_with_the_same_inputs(monkeypat
 
     seen: list[tuple] = []
 
-    def record(config, pairs):
-        seen.append((config, pairs))
+    def record(config, pairs, **execution):
+        seen.append((config, pairs, execution))
         raise EmaError("recorded")
 
     monkeypatch.setattr(api, "identify_closed_loop", record)
     log = tmp_path / "log.csv"
     log.write_text("t_s,theta_ref_deg,theta_load_deg\n0,0,0\n0.001,0,0\n")
     common = ["--data", log, "--free", "Fs=0,0.2", "--window", "0,0.001", "--starts", "3",
-              "--seed", "7", "--set", "plant.contact_tau=1e-4", "--columns", "t_s=t_s:s"]
+              "--seed", "7", "--set", "plant.contact_tau=1e-4", "--columns", "t_s=t_s:s",
+              "--backend", "loky", "--n-jobs", "1"]
     for spelling in (["--closed-loop"], ["closed-loop"]):
         r, text = invoke(*spelling, *common)
         assert r.exit_code == 2 and "recorded" in text, text
@@ -147,6 +148,7 @@ def test_closed_loop_both_spellings_reach_the_api_with_the_same_inputs(monkeypat
     assert len(seen) == 4
     assert seen[0] == seen[1] and seen[2] == seen[3]
     assert ("free.Fs", [0.0, 0.2]) in seen[0][1] and ("search", "ga") in seen[2][1]
+    assert seen[0][2] == {"backend": "loky", "n_jobs": 1, "scheduler": None}
 
 
 def test_registering_a_subcommand_is_one_pair(monkeypatch):

@@ -139,7 +139,7 @@ def test_validation_on_a_record_with_logged_pulses(tmp_path):
     """A validation record whose logged command carries pulses the law does not compute: the
     difference is applied as a disturbance (said in a note) and the fitted model predicts the
     record as well as the one it was fitted on."""
-    from ema_cli.identify.plant.fit import validate
+    from ema_cli.identify.plant.validation import validate
 
     fit = _fit(tmp_path, SYM, "symmetric")
     val = make_record(tmp_path / "pulses.mat", SYM, seconds=6.0, noise_v=0.07, seed=11,
