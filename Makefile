@@ -18,7 +18,7 @@ PIPI    := $(BIN)/python -m pip install -q --require-hashes --no-deps
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci yield-ci design-ci emps-ci clean \
+.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci yield-ci design-ci emps-ci duty-ci clean \
         lock upgrade compile
 
 help:  ## list the targets
@@ -56,7 +56,7 @@ test: $(TSTAMP)  ## lint, undeclared imports (deptry), the fast tier of the test
 test-all: test  ## make test, then the slow tier (cold compiles, long end-to-end checks)
 	$(BIN)/python -m pytest -n auto -m slow
 
-bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, yield (and on processes and Dask), the identification battery (hours)
+bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, yield (and on processes and Dask), duty, the identification battery (hours)
 	$(BIN)/python experiments/bench_compile.py
 	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
@@ -69,6 +69,7 @@ bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep,
 	rm -rf results/bench/yield-1000
 	$(BIN)/python experiments/bench_yield.py --out results/bench/yield-1000
 	$(BIN)/python experiments/bench_scale.py
+	$(BIN)/python experiments/bench_duty.py
 	$(BIN)/python experiments/bench_identify_logs.py
 	$(BIN)/python experiments/bench_idmodes.py
 	$(BIN)/python -m experiments.loggen.battery --out results/battery/logs --n 20 --seed 2026 --jobs 2
@@ -104,6 +105,11 @@ emps-ci: $(STAMP)  ## ema identify plant on the EMPS record, its claims (replace
 	$(EMA) identify plant experiments/data/emps/DATA_EMPS.mat --actuator configs/actuators/emps.yaml \
 	  --out results/emps-ci
 	$(BIN)/python -m experiments.emps_claims results/emps-ci
+
+duty-ci: $(STAMP)  ## ema duty on the bundled 8.6 h TVC profile and its acceptance test (replaces results/duty-ci)
+	rm -rf results/duty-ci
+	$(EMA) duty configs/duty/tvc.yaml --out results/duty-ci/tvc
+	$(EMA) acceptance configs/acceptance_duty.yaml --out results/duty-ci/acceptance
 
 design-ci: $(STAMP)  ## ema design on the bundled log, small budget (replaces results/design-ci)
 	rm -rf results/design-ci

@@ -42,11 +42,32 @@ UNITS: dict[str, tuple[str, float]] = {
     "kN*m/rad": ("stiffness", 1e3),
     "A": ("current", 1.0), "N*m": ("torque", 1.0), "V": ("voltage", 1.0),
     "%": ("percent", 1.0), "dB": ("decibel", 1.0),
+    "h": ("time", 3600.0), "min": ("time", 60.0),
+    "degC": ("temperature", 1.0), "K": ("temperature", 1.0),
+    "K/s": ("heating_rate", 1.0),
+    "J": ("energy", 1.0), "kJ": ("energy", 1e3), "Wh": ("energy", 3600.0),
+    "kWh": ("energy", 3.6e6),
 }
 SI_UNIT = {"time": "s", "angle": "rad", "frequency": "Hz", "rate": "rad/s",
            "stiffness": "N*m/rad", "current": "A", "torque": "N*m", "voltage": "V",
-           "percent": "%", "decibel": "dB"}
+           "percent": "%", "decibel": "dB", "temperature": "K", "heating_rate": "K/s",
+           "energy": "J"}
 """The SI (internal) unit of each dimension."""
+ZERO_CELSIUS = 273.15
+"""0 degC in kelvin: a temperature in degC is ``T_K - ZERO_CELSIUS`` (an offset, not a
+factor: :func:`to_si` and :func:`from_si` apply it, every other conversion is a factor)."""
+OFFSETS = {"degC": ZERO_CELSIUS}
+"""Units whose zero is not SI's: SI = value * factor + offset."""
+
+
+def celsius_to_kelvin(x):
+    """degC -> K (floats and arrays)."""
+    return x + ZERO_CELSIUS
+
+
+def kelvin_to_celsius(x):
+    """K -> degC (floats and arrays)."""
+    return x - ZERO_CELSIUS
 
 
 LOG_UNITS: dict[str, dict[str, tuple[float, float]]] = {
@@ -90,13 +111,13 @@ def units_of(dimension: str) -> list[str]:
 
 
 def to_si(value: float, unit: str) -> float:
-    """``value`` in ``unit`` (a key of :data:`UNITS`) -> SI."""
-    return value * UNITS[unit][1]
+    """``value`` in ``unit`` (a key of :data:`UNITS`) -> SI (degC: + 273.15 K)."""
+    return value * UNITS[unit][1] + OFFSETS.get(unit, 0.0)
 
 
 def from_si(value: float, unit: str) -> float:
-    """An SI value -> ``unit`` (a key of :data:`UNITS`)."""
-    return value / UNITS[unit][1]
+    """An SI value -> ``unit`` (a key of :data:`UNITS`; K -> degC: - 273.15)."""
+    return (value - OFFSETS.get(unit, 0.0)) / UNITS[unit][1]
 
 
 def fmt_num(value: float | int | str | None, unit: str = "", digits: int = 4, *,
@@ -146,6 +167,8 @@ QUANTITY_UNITS: dict[str, dict[str, tuple[float, str]]] = {
                       "V*s/mm": (1e3, TRANSLATIONAL)},
     "position_gain_i": {"V/rad": (1.0, ROTARY), "V/m": (1.0, TRANSLATIONAL)},
     "ratio": {"-": (1.0, ROTARY), "rad/m": (1.0, TRANSLATIONAL)},
+    "acceleration": {"rad/s^2": (1.0, ROTARY), "deg/s^2": (DEG, ROTARY),
+                     "m/s^2": (1.0, TRANSLATIONAL), "mm/s^2": (1e-3, TRANSLATIONAL)},
 }
 """Units of the load-side quantities of an actuator description, by kind: unit -> (SI factor of
 the axis, the axis it belongs to). A value of the other axis's domain is refused."""
@@ -166,15 +189,22 @@ MOTOR_UNITS: dict[str, dict[str, float]] = {
     "speed": {"rad/s": 1.0, "rpm": RPM},
     "length": {"m": 1.0, "mm": 1e-3},
     "command": {"V": 1.0, "A": 1.0, "N": 1.0, "N*m": 1.0},
+    "thermal_resistance": {"K/W": 1.0},
+    "heat_capacity": {"J/K": 1.0, "kJ/K": 1e3, "Wh/K": 3600.0},
+    "temperature_coefficient": {"1/K": 1.0, "%/K": 1e-2},
+    "power": {"W": 1.0},
+    "loss_torque": {"N*m": 1.0, "W/(rad/s)": 1.0},
+    "loss_damping": {"N*m*s/rad": 1.0, "W/(rad/s)^2": 1.0},
 }
 """Units of the motor-side and electrical quantities (always rotary or axis-free)."""
 AXIS_SI = {ROTARY: {"position": "rad", "velocity": "rad/s", "force": "N*m", "mass": "kg*m^2",
                     "stiffness": "N*m/rad", "damping": "N*m*s/rad", "gain": "N*m/V",
-                    "velocity_gain": "V*s/rad", "position_gain_i": "V/rad", "ratio": "-"},
+                    "velocity_gain": "V*s/rad", "position_gain_i": "V/rad", "ratio": "-",
+                    "acceleration": "rad/s^2"},
            TRANSLATIONAL: {"position": "m", "velocity": "m/s", "force": "N", "mass": "kg",
                            "stiffness": "N/m", "damping": "N*s/m", "gain": "N/V",
                            "velocity_gain": "V*s/m", "position_gain_i": "V/m",
-                           "ratio": "rad/m"}}
+                           "ratio": "rad/m", "acceleration": "m/s^2"}}
 """The SI unit of each load-side kind on each axis."""
 
 
@@ -218,3 +248,37 @@ def parse_quantity(value: Any, kind: str, axis: str | None) -> float:
         ok = ", ".join(u for u, (_, d) in table2.items() if d == axis)
         raise ValueError(f"{unit} is a {domain} unit; a {axis} axis expects {kind} in {ok}")
     return x * factor
+
+
+TEMPERATURE_UNITS = {"degC": (1.0, ZERO_CELSIUS), "C": (1.0, ZERO_CELSIUS),
+                     "°C": (1.0, ZERO_CELSIUS), "K": (1.0, 0.0)}
+"""Units of an absolute temperature in a config: unit -> (factor, offset), K = x*f + offset."""
+
+
+def parse_temperature(value: Any) -> float:
+    """An absolute temperature -> K: ``"40 degC"`` (also ``C``, ``°C``), ``"313.15 K"``, or a
+    bare number, read in degC (a datasheet's and a profile's unit; never SI kelvin by accident:
+    a bare 300 would otherwise be either). Raises ValueError saying what was expected."""
+    if isinstance(value, bool):
+        raise ValueError("expected a temperature such as '40 degC' or '313.15 K', got a boolean")
+    if isinstance(value, int | float):
+        x = float(value)
+        unit = "degC"
+    elif isinstance(value, str):
+        parts = value.strip().split(None, 1)
+        try:
+            x = float(parts[0])
+        except (ValueError, IndexError):
+            raise ValueError(f"expected '<number> degC' or '<number> K', got {value!r}") from None
+        unit = parts[1].strip() if len(parts) > 1 else "degC"
+        if unit not in TEMPERATURE_UNITS:
+            raise ValueError(f"unit {unit!r} is not a temperature unit; expected degC or K")
+    else:
+        raise ValueError(f"expected a temperature such as '40 degC', got {value!r}")
+    if not math.isfinite(x):
+        raise ValueError(f"must be finite, got {value!r}")
+    f, off = TEMPERATURE_UNITS[unit]
+    k = x * f + off
+    if k <= 0.0:
+        raise ValueError(f"{value!r} is at or below absolute zero")
+    return k

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ema_cli.acceptance import battery as b
+from ema_cli.acceptance import battery_duty as bd
 from ema_cli.acceptance import battery_loops as bl
 from ema_cli.acceptance import battery_sweeps as bs
 from ema_cli.config import acceptance as c
@@ -70,6 +71,9 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
          "figure_dynamic_stiffness", "the minimum strictly inside f_min_hz..f_max_hz"),
     Kind("no_load_rate", c.NoLoadRateTest, b.run_no_load_rate, "figure_no_load_rate",
          "the peak rate before the end of the run"),
+    Kind("duty", c.DutyTest, bd.run_duty, "figure_duty",
+         "the winding's peak farther from its limit than the multirate method's error, every "
+         "segment's cycle steady and no run diverged; else it is a bound (peak +- error)"),
 )}
 """Every acceptance test kind, by name."""
 

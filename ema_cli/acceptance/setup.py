@@ -43,5 +43,20 @@ def test_setups(sp: AcceptanceSpec, names: Sequence[str],
         test = sp.tests[name]
         setups[name] = actuator if not test.overrides else resolved(
             dotted_pairs(test.overrides), f"tests.{name}.set")
+        if test.test == "duty":  # its profile read and checked on this actuator first
+            _check_profile(name, test, folder, setups[name])
         check_measurable(name, test, setups[name][1])
     return actuator, setups
+
+
+def _check_profile(name: str, test: Any, folder: Path | None, setup: Setup) -> None:
+    """A duty test's profile, read relative to the spec and expanded on the test's actuator
+    (every key checked before any simulation): EmaError naming the test."""
+    from ema_cli.acceptance.duty.profile import expand
+
+    test.bind(folder)
+    try:
+        expand(test.load_profile(), "rotary", setup[0]["T_amb"],
+               test.load_profile().simulation.dt_s or setup[1])
+    except EmaError as exc:
+        raise EmaError(f"tests.{name}.profile: {exc}") from None

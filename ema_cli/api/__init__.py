@@ -19,6 +19,7 @@ load when first needed.
 from __future__ import annotations
 
 from ema_cli.api.acceptance import AcceptanceResult, acceptance
+from ema_cli.api.duty import DutyResult, duty
 from ema_cli.api.freqresp import FrequencyResponse, freqresp
 from ema_cli.api.identification import Identification, identify
 from ema_cli.api.identify_logs import (
@@ -49,11 +50,12 @@ from ema_cli.errors import EmaError
 yield_ = production_yield
 """``ema yield`` by its command's name (``yield`` is a Python keyword)."""
 
-__all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
+__all__ = ["AcceptanceResult", "ClosedLoopIdentification", "DutyResult", "EmaError",
+           "FrequencyResponse",
            "FrictionSweepIdentification", "Identification", "LoopMargins",
            "PlantIdentification", "PlantValidationResult", "identify_plant", "validate_folder",
            "ReproduceResult", "Result", "Sensitivity", "Simulation", "Sweep",
            "SyntheticData", "Threshold", "TuneResult", "YieldResult", "acceptance",
-           "freqresp", "identify", "identify_closed_loop", "identify_friction_sweep",
+           "duty", "freqresp", "identify", "identify_closed_loop", "identify_friction_sweep",
            "make_identification_data", "margins", "production_yield", "yield_", "reproduce",
            "sensitivity", "simulate", "sweep", "threshold", "tune"]

@@ -14,6 +14,7 @@ from ema_cli.cli import (
     acceptance,
     compiling,
     design,
+    duty,
     freqresp,
     identify,
     identify_plant,
@@ -63,6 +64,7 @@ COMMANDS = (
     ("freqresp", freqresp.freqresp_cmd),
     ("acceptance", acceptance.acceptance_cmd),
     ("yield", production.yield_cmd),
+    ("duty", duty.duty_cmd),
     ("tune", tune.tune_cmd),
     ("sensitivity", sensitivity.sensitivity_cmd),
     ("identify", identify.identify_cmd),
@@ -106,7 +108,7 @@ for _name, _fn in COMMANDS:
 
 
 FAST_EXIT = frozenset({"simulate", "validate", "show", "threshold", "margins", "freqresp",
-                       "acceptance", "tune", "locations", "params"})
+                       "acceptance", "duty", "tune", "locations", "params"})
 """Commands that start no worker processes: once they have finished (every file written and
 closed, output flushed) the process ends at once. The interpreter's own teardown of numba,
 LLVM and matplotlib takes ~0.45 s and does nothing these commands need; commands that may start

@@ -27,7 +27,7 @@ import math
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, PrivateAttr, field_validator, model_validator
 
 from ema_cli.config.base import (
     FiniteFloat,
@@ -37,58 +37,15 @@ from ema_cli.config.base import (
     Strict,
     tagged_union,
 )
-from ema_cli.config.run import KEY_MARK, Scalar
+from ema_cli.config.limits import DUTY_METRICS, ActuatorSpec, Limit, _at
 from ema_cli.errors import EmaError
-from ema_cli.units import SI_UNIT, UNITS, units_of
+from ema_cli.units import SI_UNIT, units_of
 
 MAX_TESTS = 50  # tests in one spec, at most [-]
 MAX_DURATION_S = 120.0  # simulated duration of one test run, at most [s]
 MIN_STEPS = 10  # a duration, a quarter period or a branch spans this many time steps, at least [-]
 SINE_PERIOD_STEPS = 88  # steps in one period of a sine test, at least (analysis.freqresp) [-]
 MARGINS_F_MIN_HZ = 1e-3  # lowest frequency of the margins' search grid [Hz]
-
-
-class Limit(Strict):
-    """A limit on one metric: ``min`` and/or ``max`` in ``unit``."""
-
-    min: FiniteFloat | None = Field(None, description="the value must be >= min")
-    max: FiniteFloat | None = Field(None, description="the value must be <= max")
-    unit: str | None = Field(None, description="unit of min and max, e.g. s, ms, deg, Hz, dB, "
-                                                "%, deg/s, N*m/rad (required)")
-
-    @field_validator("unit")
-    @classmethod
-    def _unit(cls, v: str | None) -> str:
-        if v is None:
-            raise ValueError(f"a limit needs its unit, one of {', '.join(UNITS)}")
-        if v not in UNITS:
-            raise ValueError(f"unknown unit {v!r}; expected one of {', '.join(UNITS)}")
-        return v
-
-    @model_validator(mode="after")
-    def _bounds(self) -> Limit:
-        if self.unit is None:
-            raise _at("unit", f"missing: the unit of min/max, one of {', '.join(UNITS)}")
-        if self.min is None and self.max is None:
-            raise ValueError("a limit needs min or max (or both)")
-        if self.min is not None and self.max is not None and self.min > self.max:
-            raise ValueError(f"min ({self.min}) is above max ({self.max})")
-        return self
-
-    @property
-    def dimension(self) -> str:
-        return UNITS[self.unit][0]
-
-    def si(self) -> tuple[float, float]:
-        """(lower, upper) bounds in SI (-inf/inf where not given)."""
-        f = UNITS[self.unit][1]
-        return (-math.inf if self.min is None else self.min * f,
-                math.inf if self.max is None else self.max * f)
-
-
-def _at(key: str, message: str) -> ValueError:
-    """A validation error at ``key`` below the failing model (named in the message)."""
-    return ValueError(f"{KEY_MARK}{key}{KEY_MARK}{message}")
 
 
 def _sine_seconds(f_hz: float) -> float:
@@ -338,11 +295,47 @@ class NoLoadRateTest(_Test):
         return [("duration_s", self.duration_s, MIN_STEPS)]
 
 
+class DutyTest(_Test):
+    """A mission profile (``ema duty``) on the actuator under test: its winding temperature
+    and the other duty metrics against the test's limits (the profile's own actuator and
+    limits are not used)."""
+
+    METRICS: ClassVar[dict[str, str]] = DUTY_METRICS
+
+    test: Literal["duty"]
+    profile: str | dict[str, Any] = Field(
+        description="the profile: a YAML file relative to the spec, or the profile inline")
+    insulation: str = Field("F", description="insulation class (A E B F H N R) or its limit "
+                                             "('150 degC'): the 10 K rule counts from it")
+    _folder: Path | None = PrivateAttr(default=None)
+
+    def bind(self, folder: Path | None) -> None:
+        """The folder a relative ``profile`` is read from (the spec's)."""
+        self._folder = folder
+
+    def load_profile(self) -> Any:
+        """The validated profile (``config.duty.DutyProfile``); EmaError naming the key."""
+        from ema_cli.config.duty import DutyProfile
+        from ema_cli.config.loader import load_config
+
+        src: Any = self.profile
+        if isinstance(src, str):
+            path = (self._folder / src) if self._folder is not None else Path(src)
+            if not path.is_file():
+                raise EmaError(f"profile: '{src}' is not a file (a mission profile, relative "
+                               "to the spec)")
+            src = path
+        return load_config(src, (), DutyProfile)
+
+    def sim_seconds(self) -> float:
+        return self.load_profile().sim_seconds()
+
+
 _KINDS: dict[str, type[_Test]] = {
     "step": StepTest, "frequency_response": FrequencyResponseTest, "margins": MarginsTest,
           "threshold": ThresholdTest, "hysteresis": HysteresisTest,
           "load_deflection": LoadDeflectionTest, "dynamic_stiffness": DynamicStiffnessTest,
-          "no_load_rate": NoLoadRateTest}
+          "no_load_rate": NoLoadRateTest, "duty": DutyTest}
 
 
 METRICS: dict[str, dict[str, str]] = {k: dict(cls.METRICS) for k, cls in _KINDS.items()}
@@ -350,35 +343,6 @@ METRICS: dict[str, dict[str, str]] = {k: dict(cls.METRICS) for k, cls in _KINDS.
 
 
 TestSpec = tagged_union("test", _KINDS)
-
-
-class ActuatorSpec(Strict):
-    """The actuator under test: a run config and overrides on top of it."""
-
-    config: str | None = Field(None, description="run config, relative to the spec (null: "
-                                                 "the bundled defaults)")
-    plant: dict[str, Scalar] = Field(default_factory=dict,
-                                     description="SI parameter overrides (`ema params`; "
-                                                 "off removes a saturation)")
-    nonlinearities: dict[str, Any] = Field(
-        default_factory=dict, description="name -> magnitude (`ema locations`)")
-
-    def pairs(self) -> list[tuple[str, Any]]:
-        """The overrides as dotted run-config paths (``plant.X``, ``nonlinearities.X``)."""
-        return ([(f"plant.{k}", v) for k, v in self.plant.items()]
-                + [(f"nonlinearities.{k}", v) for k, v in self.nonlinearities.items()])
-
-    def source(self, here: Path | None, owner: str) -> tuple[Path | None, Path | None]:
-        """(the run config file or None for the defaults, the folder its relative paths are
-        read from); ``here`` the folder of the ``owner`` file that names it. Raises EmaError
-        when the file does not exist."""
-        if self.config is None:
-            return None, here
-        src = (here / self.config) if here is not None else Path(self.config)
-        if not src.is_file():
-            raise EmaError(f"actuator.config: '{self.config}' is not a file (a run config, "
-                           f"relative to the {owner})")
-        return src, src.parent
 
 
 class AcceptanceSpec(Strict):

@@ -22,6 +22,7 @@ from typing import Any, Literal
 from pydantic import Field, model_validator
 
 from ema_cli.config.base import NonNegFloat, PositiveFloat, Strict
+from ema_cli.config.thermal import Thermal
 from ema_cli.model.params import MAX_DELAY, MAX_DIFF, MAX_FIR
 from ema_cli.units import AXES, ROTARY, TRANSLATIONAL, parse_quantity
 
@@ -122,6 +123,9 @@ class Drive(Strict):
         None, description="amplifier: output limit, load side [N | N*m] or off")
     bandwidth_hz: PositiveFloat | None = Field(
         None, description="amplifier: first-order bandwidth [Hz] (absent: instantaneous)")
+    thermal: Thermal | None = Field(
+        None, description="the thermal element (config/thermal.py): winding and housing "
+                          "temperatures, R(T); absent: none in the simulation")
 
 
 class FrictionNegative(Strict):
@@ -325,6 +329,8 @@ class Actuator(Strict):
 
     def _drive(self, out: dict[str, float | str]) -> None:
         d, a = self.drive, self.axis
+        if d.thermal is not None:
+            out.update(d.thermal.params(d.type))
         if d.type == "armature":
             for k in ("gain", "limit", "bandwidth_hz"):
                 if getattr(d, k) is not None:

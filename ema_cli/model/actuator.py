@@ -40,16 +40,17 @@ the static law (``model.friction``)."""
 LFRIC_NONE, LFRIC_LUGRE, LFRIC_STATIC = 0, 1, 2
 CTRL_PAPER, CTRL_DISCRETE, CTRL_NONE = 0, 1, 2
 B_EXTRAS, B_RIGID, B_AMP, B_AMP_BW, B_FRIC_L, B_CTRL, B_EXT, B_TRANS = 2, 3, 4, 5, 6, 8, 10, 11
+B_THERMAL = 12
 """Bit positions in a variant code: motor friction (bits 0-1), extras (the paper cascade's
 sampling, quantisers, compensators), rigid, amplifier, amplifier bandwidth, load friction
 (bits 6-7), controller (bits 8-9), the input signal read (a disturbance or the actuation), the
-transmission's friction or preload."""
+transmission's friction or preload, the thermal element (``model.thermal``)."""
 PAPER_MASK = (1 << B_RIGID) - 1
 """Variant codes below this are the paper's EMA (compliant, armature, motor LuGre, the paper
 cascade): the seven codes the kernel had before actuator descriptions."""
 
 FLAGS = ("fric_m", "extras", "rigid", "amp", "amp_bw", "fric_L", "ctrl", "ext", "hybrid",
-         "lugre_m", "lugre_L", "static_m", "static_L", "trans")
+         "lugre_m", "lugre_L", "static_m", "static_L", "trans", "thermal")
 Flags = namedtuple("Flags", FLAGS)  # type: ignore[misc]
 """The structure of a variant, decoded (every field a compile-time constant in the kernel)."""
 
@@ -66,7 +67,8 @@ def flags_nb(variant):
                  (variant >> B_AMP) & 1 != 0, (variant >> B_AMP_BW) & 1 != 0, fric_l, ctrl,
                  (variant >> B_EXT) & 1 != 0, static_m or static_l,
                  FRIC_LUGRE1 <= fric_m <= FRIC_LUGRE, fric_l == LFRIC_LUGRE,
-                 static_m, static_l, (variant >> B_TRANS) & 1 != 0)
+                 static_m, static_l, (variant >> B_TRANS) & 1 != 0,
+                 (variant >> B_THERMAL) & 1 != 0)
 
 
 def describe_variant(code: int) -> str:
@@ -92,6 +94,8 @@ def describe_variant(code: int) -> str:
             extra.append("input signal")
         if (code >> B_TRANS) & 1:
             extra.append("transmission friction/preload")
+        if (code >> B_THERMAL) & 1:
+            extra.append("thermal")
         parts.extend(extra)
     return ", ".join(parts)
 

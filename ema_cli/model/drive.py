@@ -17,6 +17,10 @@ EMPS publish it); on a rigid axis the force at the load is ``f`` itself.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
+import numpy as np
+
 from ema_cli._numba import njit
 from ema_cli.model.elements import saturate_nb
 
@@ -40,3 +44,17 @@ def amplifier_output_nb(f_amp, u_amp, amp_gain, amp_limit, amp_bw):
     """The amplifier's output force (torque), load side: the lag's state ``f`` with a
     bandwidth, else the demand itself."""
     return f_amp if amp_bw else amplifier_demand_nb(u_amp, amp_gain, amp_limit)
+
+
+def torque_envelope(p: Mapping[str, float], w_m: np.ndarray, t_m: np.ndarray) -> np.ndarray:
+    """The motor torque the drive can give at motor speed ``w_m`` [rad/s] in the quadrant of
+    ``t_m`` [N*m] (its magnitude): an armature ``min(Kt*I_max, Kt*(V_max -+ Ke*|w_m|)/R)``
+    (``-`` motoring, ``T*w >= 0``; ``+`` braking: the back-EMF helps; V_max the speed PI's
+    voltage limit ``sat2``, I_max the current limit ``sat3``); an amplifier its output limit
+    over the ratio."""
+    w = np.abs(np.asarray(w_m, dtype=float))
+    if p["drive"] == 1.0:
+        return np.full(w.shape, p["amp_limit"] / p["m"])
+    motoring = np.asarray(t_m) * np.asarray(w_m) >= 0.0
+    volt = p["Kt"] * (p["sat2"] + np.where(motoring, -1.0, 1.0) * p["Ke"] * w) / p["R"]
+    return np.maximum(np.minimum(p["Kt"] * p["sat3"], volt), 0.0)

@@ -13,8 +13,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ema_cli.errors import EmaError
+from ema_cli.model import thermal
 from ema_cli.model.states import STATES
-from ema_cli.units import DEG
+from ema_cli.units import DEG, ZERO_CELSIUS
 
 
 @dataclass(frozen=True)
@@ -217,13 +218,30 @@ PARAMS: tuple[Param, ...] = (
     Param("plant_input", "-", 0.0, "controller none: the input signal is the drive command "
           "(command), the force (torque) on the load (force) or the armature current (current)",
           choices=PLANT_INPUT_CHOICES),
+    # the drive's thermal element (model/thermal.py; actuator drive.thermal): off by default
+    Param("thermal", "-", 0.0, "thermal element: winding and housing temperatures as states, "
+          "the armature's resistance R(T) = R*(1 + alpha_cu*(T_w - T_ref)): 0 off, 1 on"),
+    Param("alpha_cu", "1/K", thermal.ALPHA_CU, "temperature coefficient of the winding's "
+          "resistance (copper)"),
+    Param("T_ref", "K", thermal.T_REF_C + ZERO_CELSIUS, "temperature at which R is given"),
+    Param("T_amb", "K", thermal.T_AMB_C + ZERO_CELSIUS, "ambient temperature"),
+    Param("Rth_wh", "K/W", thermal.RTH_WH, "thermal resistance winding-housing"),
+    Param("Rth_ha", "K/W", thermal.RTH_HA, "thermal resistance housing-ambient"),
+    Param("Cth_w", "J/K", thermal.CTH_W, "heat capacity of the winding"),
+    Param("Cth_h", "J/K", thermal.CTH_H, "heat capacity of the housing (stator, frame)"),
+    Param("fric_heat", "-", 1.0, "share of the motor's friction losses (bm, the friction law) "
+          "heating the housing, 0..1"),
+    Param("fe_hyst", "N*m", 0.0, "iron (hysteresis) loss per motor speed: fe_hyst*|w_m| [W] "
+          "into the housing"),
+    Param("fe_eddy", "N*m*s/rad", 0.0, "iron (eddy-current) loss: fe_eddy*w_m^2 [W] into the "
+          "housing"),
     # initial state (default: at rest at 0); a closed-loop fit starts its log segments here
     *(Param(f"x0_{st.name}", st.unit, 0.0, f"initial {st.description}", nonnegative=False,
             side=st.side if st.side == "load" else "") for st in STATES),
 )
 INITIAL_STATE = tuple(f"x0_{st.name}" for st in STATES)
 """The initial-state parameters, in the order of ``model.states.STATES``."""
-FLAGS = ("locked", "rigid", "dist_out", "ext_hold")
+FLAGS = ("locked", "rigid", "dist_out", "ext_hold", "thermal")
 CONTROLLER_PARAMS = ("Kpp", "Kps", "Kis", "fb_motor", "dzi_v", "dzi_band", "ff_fc", "ff_fs",
                      "ff_vs", "ff_sigma2", "ff_sigma0", "ff_sigma1", "ff_band", "notch_hz",
                      "notch_depth", "notch_zeta")
@@ -236,6 +254,8 @@ INDEX: dict[str, int] = {p.name: i for i, p in enumerate(PARAMS)}
 N_PARAMS = len(PARAMS)
 BY_NAME: dict[str, Param] = {p.name: p for p in PARAMS}
 
+THERMAL_POSITIVE = ("T_ref", "T_amb", "Rth_wh", "Rth_ha", "Cth_w", "Cth_h")
+"""The thermal element's parameters that must be > 0 (absolute temperatures, the network)."""
 SIGMA0_PER_FC = 1.0e3  # bristle stiffness per N*m of Coulomb friction [1/rad]
 FS_PER_FC = 1.5  # static / Coulomb friction ratio [-]
 BRISTLE_DAMPING_RATIO = 0.5  # sigma1 = 2*ratio*sqrt(sigma0*Jm) [-]
@@ -336,6 +356,12 @@ def resolve(overrides: Mapping[str, object] | None = None) -> dict[str, float]:
     for flag in FLAGS:
         if values[flag] not in (0.0, 1.0):
             raise EmaError(f"parameter '{flag}' must be 0/off or 1/on, got {values[flag]}")
+    for name in THERMAL_POSITIVE:
+        if not values[name] > 0:  # type: ignore[operator]
+            raise EmaError(f"parameter '{name}' must be > 0 ({BY_NAME[name].unit}), got "
+                           f"{values[name]}")
+    if values["fric_heat"] > 1.0:  # type: ignore[operator]
+        raise EmaError(f"parameter 'fric_heat' must lie in [0, 1] (-), got {values['fric_heat']}")
     if values["friction"] == 1.0 and (values["Fc"] <= 0 or values["vs"] <= 0):  # type: ignore[operator]
         raise EmaError("LuGre friction needs Fc > 0 and vs > 0")
     _resolve_description(values)

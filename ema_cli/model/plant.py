@@ -91,9 +91,11 @@ def motor_speed_rate_nb(i, Kt, t_drive, w_m, t_shaft, t_fric_m, tf_b, visc, bm, 
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
-def current_rate_nb(i, w_m, u_amp, R, inv_L, Ke, sat3):
-    """di/dt (:func:`armature_rate_nb`)."""
-    return armature_rate_nb(i, w_m, u_amp, R, inv_L, Ke, sat3)
+def current_rate_nb(i, w_m, u_amp, R, inv_L, Ke, sat3, th_w, th_r0, th_ra, thermal):
+    """di/dt (:func:`armature_rate_nb`), with the thermal element's R(T) = ``th_r0 + th_ra*th_w``
+    (``model.thermal``) when the variant has it."""
+    r = th_r0 + th_ra * th_w if thermal else R
+    return armature_rate_nb(i, w_m, u_amp, r, inv_L, Ke, sat3)
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")

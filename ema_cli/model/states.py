@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ema_cli.model import drive, plant, transmission
+from ema_cli.model import drive, plant, thermal, transmission
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,10 @@ STATES: tuple[State, ...] = (
     State("z_L", "rad", "LuGre bristle deflection at the load", kind="exact", side="load"),
     State("f_t", "N*m", "transmission friction torque (Dahl element), load side",
           rate=transmission.friction_rate_nb, side="load", active=("trans",)),
+    State("th_w", "K", "winding temperature rise above ambient (thermal element)",
+          rate=thermal.winding_rate_nb, active=("thermal",)),
+    State("th_h", "K", "housing temperature rise above ambient (thermal element)",
+          rate=thermal.housing_rate_nb, active=("thermal",)),
 )
 STATE_INDEX: dict[str, int] = {s.name: k for k, s in enumerate(STATES)}
 N_STATES = len(STATES)

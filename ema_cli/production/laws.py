@@ -30,9 +30,10 @@ MAX_UNITS = 2**30
 """Units in one sampled sequence, at most (the Sobol' sequence's 30 bits) [-]."""
 METHODS = ("random", "sobol")
 
-_STRICTLY_POSITIVE = ("m", "Jm", "JL", "L", "contact_pen")
+_STRICTLY_POSITIVE = ("m", "Jm", "JL", "L", "contact_pen", "T_ref", "T_amb", "Rth_wh", "Rth_ha",
+                      "Cth_w", "Cth_h")
 """Plant parameters that must be > 0 (``params.resolve``), not only >= 0."""
-_AT_MOST_ONE = ("contact_hc", "fb_motor", "notch_depth")
+_AT_MOST_ONE = ("contact_hc", "fb_motor", "notch_depth", "fric_heat")
 """Plant parameters that must lie in [0, 1] (``params.resolve``)."""
 _NOT_TOLERANCED = {"Ts": "the controller sample time must stay a whole multiple of dt"}
 

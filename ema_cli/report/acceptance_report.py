@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 
 from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
-from ema_cli.units import DEG, from_si
+from ema_cli.units import DEG, ZERO_CELSIUS, from_si
 
 
 def _lines(ax: Any, title: str, xlabel: str, ylabel: str) -> None:
@@ -169,6 +169,25 @@ def figure_no_load_rate(run: Any, test: Any, title: str) -> Figure:
         _limit_line(ax, test.limits["rate"], "deg/s")
     _lines(ax, f"{title}\n{run.name}: {d['amplitude_deg']:g} deg step, no load", "time [s]",
            "load rate [deg/s]")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+def figure_duty(run: Any, test: Any, title: str) -> Figure:
+    d = run.data
+    fig, ax = subplots(1, 1, figsize=(9, 5))
+    t = np.asarray(d["t"])
+    scale, unit = (3600.0, "h") if len(t) and t[-1] > 3 * 3600 else (
+        (60.0, "min") if len(t) and t[-1] > 180 else (1.0, "s"))
+    ax.plot(t / scale, np.asarray(d["peak"]) - ZERO_CELSIUS, "C3", lw=1.0,
+            label="winding, peak")
+    ax.plot(t / scale, np.asarray(d["t_w"]) - ZERO_CELSIUS, "C1", lw=1.4, label="winding")
+    ax.plot(t / scale, np.asarray(d["t_h"]) - ZERO_CELSIUS, "C0", lw=1.4, label="housing")
+    ax.plot(t / scale, np.asarray(d["ambient"]) - ZERO_CELSIUS, color="0.4", ls=":", lw=1.0,
+            label="ambient")
+    _limit_line(ax, test.limits.get("winding_temperature"), "degC")
+    _lines(ax, f"{title}\n{run.name}: profile {d['profile']}", f"time [{unit}]",
+           "temperature [degC]")
     ax.legend(fontsize=8, loc="best")
     return fig
 

@@ -59,6 +59,12 @@ DERIVED: tuple[tuple[str, str], ...] = (
     ("t_const", "T_load - offset: the constant external torque on the load"),
     ("inv_amp_tau", "1/amp_tau"),
     ("a_vf", "the discrete cascade's velocity filter coefficient"),
+    ("th_r0", "thermal: R at ambient, R*(1 + alpha_cu*(T_amb - T_ref))"),
+    ("th_ra", "thermal: R*alpha_cu (R = th_r0 + th_ra*th_w)"),
+    ("th_gwh", "thermal: 1/Rth_wh"),
+    ("th_gha", "thermal: 1/Rth_ha"),
+    ("th_icw", "thermal: 1/Cth_w"),
+    ("th_ich", "thermal: 1/Cth_h"),
 )
 """Constants derived once per lane from its parameters (``sim.kernel._init`` computes them)."""
 BOOL_DERIVED = ("contact", "is_step")
@@ -435,3 +441,5 @@ set_xI = _BUILT["set_xI"]
 set_f_amp = _BUILT["set_f_amp"]
 set_z_L = _BUILT["set_z_L"]
 set_f_t = _BUILT["set_f_t"]
+set_th_w = _BUILT["set_th_w"]
+set_th_h = _BUILT["set_th_h"]

@@ -255,6 +255,13 @@ def init_nb(W, n_real, step_info, qidx, dt, n_steps):
         else:
             W[R.nw, j], W[R.nc, j] = 0.0, 0.0
         W[R.t_const, j] = W[R.T_load, j] - W[R.offset, j]
+        r0, alpha = W[R.R, j], W[R.alpha_cu, j]
+        W[R.th_r0, j] = r0 * (1.0 + alpha * (W[R.T_amb, j] - W[R.T_ref, j]))
+        W[R.th_ra, j] = r0 * alpha
+        W[R.th_gwh, j] = 1.0 / W[R.Rth_wh, j]
+        W[R.th_gha, j] = 1.0 / W[R.Rth_ha, j]
+        W[R.th_icw, j] = 1.0 / W[R.Cth_w, j]
+        W[R.th_ich, j] = 1.0 / W[R.Cth_h, j]
         at = W[R.amp_tau, j]
         W[R.inv_amp_tau, j] = 1.0 / at if at > 0.0 else 0.0
         ts = W[R.Ts, j]

@@ -62,7 +62,13 @@ SIGNALS: tuple[Column, ...] = (
          "the drive's force (torque) on the axis, load side", "f_drive"),
     _col("friction_load", "N*m", "friction_load_nm", 1.0, "friction at the load, load side",
          "f_fric_L"),
+    _col("winding_rise", "K", "winding_rise_k", 1.0,
+         "winding temperature rise above ambient (thermal element)", "th_w"),
+    _col("housing_rise", "K", "housing_rise_k", 1.0,
+         "housing temperature rise above ambient (thermal element)", "th_h"),
 )
+THERMAL_SIGNALS = ("winding_rise", "housing_rise")
+"""The thermal element's signals (shown only for an actuator that has it)."""
 PAPER_SIGNALS = 17
 """The first signals are the paper's EMA's (its tables and files show exactly these)."""
 
@@ -144,6 +150,8 @@ def shown(params: Mapping[str, float], motor: bool = True) -> frozenset[str]:
     current, a site without friction no friction signal, a translational axis without a ratio
     (``motor`` False) no motor side."""
     names = {c.name for c in SIGNALS} | {c.name for c in METRICS}
+    if params.get("thermal", 0.0) == 0.0:
+        names -= set(THERMAL_SIGNALS)
     paper = (params.get("rigid", 0.0) == 0.0 and params.get("drive", 0.0) == 0.0
              and params.get("ctrl", 0.0) == 0.0 and params.get("friction_L", 0.0) == 0.0
              and params.get("friction", 0.0) != 2.0)

@@ -21,6 +21,7 @@ from ema_cli.model.actuator import (
     B_EXTRAS,
     B_FRIC_L,
     B_RIGID,
+    B_THERMAL,
     B_TRANS,
     CTRL_NONE,
     FRIC_LUGRE1,
@@ -53,7 +54,8 @@ def _lane_variant(W, j):
     return (fric_m | (int(extras) << B_EXTRAS) | (int(W[R.rigid, j] != 0.0) << B_RIGID)
             | (int(amp) << B_AMP) | (int(amp and W[R.amp_tau, j] > 0.0) << B_AMP_BW)
             | (fric_l << B_FRIC_L) | (ctrl << B_CTRL) | (int(ext) << B_EXT)
-            | (int(trans) << B_TRANS))
+            | (int(trans) << B_TRANS)
+            | (int(W[R.thermal, j] != 0.0) << B_THERMAL))
 
 
 @njit(cache=True, error_model="numpy")

@@ -34,6 +34,10 @@ WRITERS = {
               str(ROOT / "configs" / "tolerances.yaml"), "--n", "1", "--no-worst"],
     "tune": ["tune", str(ROOT / "configs" / "tune.yaml"), "--budget", "128"],
     "design": ["design", str(ROOT / "experiments" / "logs" / "design_hc_1pct.csv")],
+    "duty": ["duty", str(ROOT / "configs" / "duty" / "hold_and_move.yaml"), "--no-hot",
+             "--set", "segments.0.repeat.count=2", "--set", "segments.1.sine.cycles=4",
+             "--set", "segments.0.repeat.segments.1.dwell.duration_s=0.1",
+             "--set", "segments.0.repeat.segments.3.dwell.duration_s=0.1"],
     "sensitivity": ["sensitivity", str(ROOT / "configs" / "sensitivity.yaml"), "--n", "1",
                     "--set", "simulation.duration_s=0.01", "--no-progress", "-j", "1"],
 }
@@ -90,6 +94,7 @@ OTHER_INPUT = {  # one input changed, and how the refusal names it
     "freqresp": (["--set", "plant.kL=600"], "--set plant.kL"),
     "acceptance": (["--set", "actuator.plant.kL=600"], "--set actuator.plant.kL"),
     "sensitivity": (["--set", "seed=5"], "--set seed"),
+    "duty": (["--set", "ambient=45"], "--set ambient"),
 }
 
 

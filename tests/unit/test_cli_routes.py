@@ -28,6 +28,7 @@ ROUTES = {
     "margins": "ema_cli.api.margins.margins",
     "freqresp": "ema_cli.api.freqresp.freqresp",
     "acceptance": "ema_cli.api.acceptance.acceptance",
+    "duty": "ema_cli.api.duty.duty",
     "yield": "ema_cli.api.production.production_yield",
     "tune": "ema_cli.api.tune.tune",
     "sensitivity": "ema_cli.api.sensitivity.sensitivity",

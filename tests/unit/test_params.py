@@ -27,7 +27,7 @@ DERIVED = {"c", "sigma_t", "Fs", "sigma0", "sigma1", "Fc_neg", "Fs_neg", "sigma2
            "Fs_L_neg", "Fv_L_neg", "sigma0_L", "sigma1_L"}
 NEGATIVE_OK = {"T_load", "k_h", "offset", *(f"dc_fir{k}" for k in range(8)),
                *(f"x0_{s}" for s in ("theta_m", "w_m", "i", "theta_L", "w_L", "z", "xI", "f_amp",
-                                     "z_L", "f_t"))}
+                                     "z_L", "f_t", "th_w", "th_h"))}
 # docs/model.md §4: only these may be negative (loads, the offset, FIR taps, initial states)
 
 
