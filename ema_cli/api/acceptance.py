@@ -176,6 +176,10 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     from ema_cli.acceptance.setup import test_setups
 
     (params, _), setups = test_setups(sp, names, base_dir(spec))
+    from ema_cli.limits import estimate
+
+    work = sum(sp.tests[n].sim_seconds() / setups[n][1] for n in names)
+    estimate(work, f"{len(names)} test(s), {work:.3g} integration steps (--only runs fewer)")
     t0 = time.perf_counter()
     runs = []
     rows = []

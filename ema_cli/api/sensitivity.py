@@ -189,7 +189,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
                 force: bool = False, progress: bool = False,
                 cache_dir: str | Path | None = None, out: str | Path | None = None,
                 write: bool = False, scheduler: str | None = None,
-                log: Callable[[str], None] | None = None) -> Sensitivity:
+                log: Callable[[str], None] | None = None,
+                on_progress: Callable[[str, int | None, int | None], None] | None = None
+                ) -> Sensitivity:
     """Run a sensitivity study config (factors, metrics, inputs), as ``ema sensitivity CONFIG
     --method --n --set ...`` does. By default nothing is written (``.save()`` writes the
     folder); ``write`` True (or ``out`` given): the command's folder is written as the study
@@ -200,7 +202,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     n        Sobol base samples (a power of two) or Morris trajectories (default: the config's)
     cache_dir  a job cache to use (finished samples are reused by later calls); without it
              nothing is written to disk
-    log      ``log(text)``: one line per input as it starts
+    log      ``log(text)``: one line per input as it starts, and the size and time estimate
+    on_progress  ``on_progress(stage, done, total)``: the stages and steps the command line
+             shows (``ema_cli.progress.StageHook``), e.g. ("simulations", 4096, 98304)
     n_jobs, backend, scheduler, force, progress   as ``api.sweep``
     """
     from ema_cli.api._inputs import capped_jobs, check_sensitivity_steps, choice_arg, number_arg
@@ -209,6 +213,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     from ema_cli.config.sensitivity import SensitivityConfig
 
     _parallel_args(n_jobs, backend, force, progress, cache_dir)
+    from ema_cli.api._inputs import callable_arg
+
+    callable_arg(on_progress, "on_progress")
     choice_arg(method, "method", ("sobol", "morris"))
     number_arg(n, "n", low=1, integer=True)
     pairs = override_pairs(overrides)
@@ -218,9 +225,12 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     check_command(cfg, "sensitivity")
     check_sensitivity_steps(cfg, method, n, source_name(config))
     n_jobs = capped_jobs(n_jobs, cfg, backend)
-    res = run_sensitivity(cfg, folder_arg(out), method, n, n_jobs=n_jobs, backend=backend,
-                          scheduler=scheduler, force=force, progress=progress,
-                          cache_dir=Path(cache_dir) if cache_dir is not None else None,
-                          base_dir=base_dir(config), source=source_name(config),
-                          overrides=pairs, write=write or out is not None, log=log)
+    from ema_cli.progress import hooked
+
+    with hooked(on_progress, log):
+        res = run_sensitivity(cfg, folder_arg(out), method, n, n_jobs=n_jobs, backend=backend,
+                              scheduler=scheduler, force=force, progress=progress,
+                              cache_dir=Path(cache_dir) if cache_dir is not None else None,
+                              base_dir=base_dir(config), source=source_name(config),
+                              overrides=pairs, write=write or out is not None, log=log)
     return Sensitivity(res, pairs)

@@ -403,9 +403,12 @@ def write_columns(path: Path, columns: Mapping[str, Any], float_format: str = "%
 
 
 def manifest(command: str, **fields: Any) -> dict[str, Any]:
-    """The common manifest: version, command, time, git commit, platform, plus ``fields``."""
+    """The common manifest: version, command, time, git commit, platform, the command's
+    estimated and elapsed time so far (``progress.timing``), plus ``fields``."""
     import numba
     import numpy
+
+    from ema_cli.progress import timing
 
     return {
         "ema_version": __version__,
@@ -416,5 +419,6 @@ def manifest(command: str, **fields: Any) -> dict[str, Any]:
         "numpy": numpy.__version__,
         "numba": numba.__version__,
         "machine": platform.machine(),
+        "timing": timing(),
         **fields,
     }

@@ -208,6 +208,31 @@ def yield_markdown(res: Any) -> str:
     return "\n".join(out) + "\n"
 
 
+def console_lines(res: Any, drivers: int = 3) -> list[str]:
+    """The console's answer after the headline: the limits that fail most with their first
+    ``drivers`` tolerances (SRRC), and the worst unit of the tolerance box (its smallest
+    margin), as short lines (``yield.md`` has the tables)."""
+    out = []
+    failing = sorted((d for d in res.drivers if d["n_fail"] > 0), key=lambda d: -d["n_fail"])
+    for d in failing[:3]:
+        top = ", ".join(f"{p} {b:+.2f}" for p, b in d["drivers"][:drivers] if abs(b) >= 0.05)
+        out.append(f"  drivers of {d['label']} ({d['n_fail']} fail): "
+                   f"{top or 'none above 0.05 (SRRC)'}")
+    w = res.worst
+    if w is not None:
+        found = [(label, v) for label, v in w.limits.items() if v["found"]]
+        if found:
+            label, v = min(found, key=lambda lv: lv[1]["margin"])
+            out.append(f"  worst unit: {label} {md_cell(v['value'])} {v['unit']} against "
+                       f"{v['limit']} (margin {v['margin']:+.3f}, {v['result']}), found by "
+                       f"{v['stage']}")
+        missing = [label for label, v in w.limits.items() if not v["found"]]
+        if missing:
+            out.append(f"  worst unit not found for {len(missing)} limit(s): "
+                       f"{', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}")
+    return out
+
+
 def _drivers_md(res: Any) -> list[str]:
     failing = [d for d in res.drivers if d["n_fail"] > 0]
     out = ["## Why units fail", "",
