@@ -78,15 +78,23 @@ class AcceptanceResult:
         """The verdict table: test, kind, metric, condition, value, min, max, unit, result
         (PASS, FAIL or INCONCLUSIVE), measured (inside the test's range), lower, upper (the
         bound when not measured, in ``unit``), value_si, si_unit, note, reason (why
-        INCONCLUSIVE, naming the setting to change) (``wide``), or ``long`` (test, metric,
+        INCONCLUSIVE, naming the setting to change), reads (the value as the commands print it:
+        ``ema_cli.vocab.quantity``) (``wide``), or ``long`` (test, metric,
         condition, quantity, value)."""
         import dataclasses
 
         import pandas as pd
 
+        from ema_cli.vocab import quantity
+
         df = pd.DataFrame([dataclasses.asdict(v) for v in self.verdicts])
         if len(df):
             df.insert(df.columns.get_loc("result") + 1, "passed", df["result"] == "PASS")
+            # the value as every command prints it (ema_cli.vocab): "no phase crossover
+            # (> 109.4 dB)", "not measured"
+            df["reads"] = [quantity(v.value, v.unit, metric=v.metric, measured=v.measured,
+                                    lower=v.lower, upper=v.upper, note=v.note)
+                           for v in self.verdicts]
         if form == "wide":
             return df
         if form != "long":

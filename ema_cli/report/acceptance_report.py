@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
 from ema_cli.units import DEG, from_si
+from ema_cli.vocab import free_play
 
 
 def _lines(ax: Any, title: str, xlabel: str, ylabel: str) -> None:
@@ -115,7 +116,7 @@ def figure_hysteresis(run: Any, test: Any, title: str) -> Figure:
     play = run.values("free_play")[0].value / DEG
     _lines(axes[0], f"command -> load loop (width {hyst:.4g} deg)", "command [deg]",
            "load angle - command [deg]")
-    _lines(axes[1], f"motor -> load lost motion (free play {play:.4g} deg)",
+    _lines(axes[1], f"motor -> load lost motion (free play {free_play(play)})",
            "load angle [deg]", "motor angle / m - load angle [deg]")
     for ax in axes:
         ax.legend(fontsize=8, loc="upper left", markerscale=8)
@@ -137,7 +138,7 @@ def figure_load_deflection(run: Any, test: Any, title: str) -> Figure:
     k = run.values("stiffness")[0].value
     play = run.values("free_play")[0].value / DEG
     _lines(ax, f"{title}\n{run.name}: load deflection, stiffness {k:.4g} N*m/rad, free play "
-               f"{play:.4g} deg", "load torque [N*m]",
+               f"{free_play(play)}", "load torque [N*m]",
            "load angle [deg]")
     ax.legend(fontsize=8, loc="upper left")
     return fig
@@ -199,19 +200,15 @@ def fmt_limit(v: Any) -> str:
     return " and ".join(parts)
 
 
-def fmt_measured(v: Any) -> str:
-    """A verdict's value without its unit: the number when measured, else the bound it is
-    known by ("> 2", "<= 0.0001"; "not measured" when nothing is known)."""
-    if v.measured:
-        return fmt_value(v.value)
-    lo, hi = v.lower, v.upper
-    if math.isfinite(lo) and lo > 0 and not math.isfinite(hi):
-        return f"> {fmt_value(lo)}"
-    if math.isfinite(hi) and not (math.isfinite(lo) and lo > 0):
-        return f"<= {fmt_value(hi)}"
-    if math.isfinite(lo) and math.isfinite(hi) and lo > 0:
-        return f"{fmt_value(lo)}..{fmt_value(hi)}"
-    return "not measured"
+def fmt_measured(v: Any, with_unit: bool = True) -> str:
+    """A verdict's value in the one vocabulary (``ema_cli.vocab.quantity``): the number when
+    measured, else the bound it is known by ("> 2 Hz", "<= 0.0001 s"; "not measured" when
+    nothing is known), a margin without crossover in words ("no phase crossover (> 109.4 dB)");
+    ``with_unit`` False: without the unit (a table whose column names it)."""
+    from ema_cli.vocab import quantity
+
+    return quantity(v.value, v.unit if with_unit else "", metric=v.metric, measured=v.measured,
+                    lower=v.lower, upper=v.upper, note=v.note)
 
 
 RESULT_MD = {"PASS": "PASS", "FAIL": "**FAIL**", "INCONCLUSIVE": "_INCONCLUSIVE_"}
@@ -241,7 +238,8 @@ def acceptance_markdown(res: Any) -> str:
              "|---|---|---|---|---|---|---|---|"]
     for v in res.verdicts:
         note = "; ".join(x for x in (v.reason, v.note) if x).replace("|", "\\|")
-        lines.append(f"| {v.test} | {v.metric} | {v.condition} | {fmt_measured(v)} | "
+        shown = fmt_measured(v, with_unit=False)
+        lines.append(f"| {v.test} | {v.metric} | {v.condition} | {shown} | "
                      f"{fmt_limit(v)} | {v.unit} | {RESULT_MD[v.result]} | {note} |")
     lines += ["", "A value measured inside the test's range is PASS or FAIL against its limit. "
               "Outside that range the test only bounds it (`> 2`: above 2): the row is PASS or "

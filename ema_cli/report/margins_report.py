@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from ema_cli.analysis.linear import Margins
 from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_columns, write_json, write_text
+from ema_cli.vocab import margin_text
 
 OUTPUT_FILES = ("config.resolved.yaml", "margins.json", "loops.csv", "margins.png",
                 "manifest.json")
@@ -29,10 +30,10 @@ def margins_figure(f_hz: np.ndarray, loops: Mapping[str, np.ndarray],
     text_ax.axis("off")
     lines = ["Margins (loop broken at its feedback, the other closed)", ""]
     for loop, m in result.items():
-        gm = (f"{m.gm_db:.3g} dB at {m.f_gm_hz:.3g} Hz" if math.isfinite(m.gm_db)
-              else "infinite (no phase crossover)")
-        pm = (f"{m.pm_deg:.3g} deg at {m.f_pm_hz:.3g} Hz" if math.isfinite(m.pm_deg)
-              else "infinite (no gain crossover)")
+        gm = (f"{margin_text(m.gm_db, 'gain_margin')} at {m.f_gm_hz:.3g} Hz"
+              if math.isfinite(m.gm_db) else margin_text(m.gm_db, "gain_margin"))
+        pm = (f"{margin_text(m.pm_deg, 'phase_margin')} at {m.f_pm_hz:.3g} Hz"
+              if math.isfinite(m.pm_deg) else margin_text(m.pm_deg, "phase_margin"))
         lines += [f"{loop} loop", f"   gain margin   {gm}", f"   phase margin  {pm}", ""]
     text_ax.text(0.02, 0.95, "\n".join(lines), va="top", family="monospace", fontsize=10,
                  transform=text_ax.transAxes)
