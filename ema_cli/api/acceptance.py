@@ -187,7 +187,7 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     from ema_cli.limits import estimate
 
     work = sum(sp.tests[n].sim_seconds() / setups[n][1] for n in names)
-    estimate(work, f"{len(names)} test(s), {work:.3g} integration steps (--only runs fewer)")
+    estimate(work, f"{len(names)} test(s), {work:,.0f} integration steps (--only runs fewer)")
     t0 = time.perf_counter()
     runs = []
     rows = []

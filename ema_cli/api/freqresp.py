@@ -232,7 +232,7 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
                 "fewer frequencies or amplitudes, or a larger simulation.dt_s")
     from ema_cli.limits import estimate
 
-    estimate(steps, f"{len(amps)} amplitude(s) x {n} frequencies, {steps:.3g} integration "
+    estimate(steps, f"{len(amps)} amplitude(s) x {n} frequencies, {steps:,.0f} integration "
              "steps (a lower --f-min costs most)")
     t0 = time.perf_counter()
     points = sinestream(params, amps, f, dt=cfg.simulation.dt_s)

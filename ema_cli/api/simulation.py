@@ -245,6 +245,9 @@ def simulate(
 
     check_input_start(run.signal, run.duration)
     n_steps, dec = plan_steps(run.duration, run.dt, run.output_interval)
+    from ema_cli.limits import estimate
+
+    estimate(n_steps, f"one run of {n_steps:,} steps", workers=1)
     timings = {"config": time.perf_counter() - t0}
     res = simulate_batch(np.array([to_row(run.params)]), [run.signal], None, run.dt, n_steps,
                          dec)
