@@ -237,3 +237,18 @@ def test_threshold_table_units(width, tmp_path):
     assert f"{res['threshold']:.5g} deg" in flat
     assert f"[{res['bracket'][0]:.5g} deg, {res['bracket'][1]:.5g} deg]" in flat
     assert f"{100 * res['relative_width']:.2g} %" in flat
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_help_summaries_are_whole(width):
+    # `ema --help` used to cut every summary with "...": each command's summary is printed
+    # whole, on one line, at 80 columns
+    from ema_cli.cli.main import COMMANDS, SHORT_HELP
+
+    r, out = invoke(width, "--help")
+    assert r.exit_code == 0
+    check_width(out, width)
+    assert "..." not in out.split("\n", 1)[1]  # the usage line's [ARGS]... is click's
+    for name, _ in COMMANDS:
+        line = next(ln for ln in out.splitlines() if ln.strip().startswith(name + " "))
+        assert line.strip().endswith(SHORT_HELP[name]), line
