@@ -113,7 +113,7 @@ class AcceptanceResult:
         from ema_cli.report.acceptance_report import test_figure
 
         run = self.run(test) if test is not None else self.runs[0]
-        return test_figure(run, self.spec.tests[run.name], self.title)
+        return test_figure(run, self.spec.tests[run.name], self.title, self.verdicts)
 
     def save(self, folder: str | Path | None = None) -> Path:
         """Write acceptance.md, acceptance.csv, one figure per test, the spec and a manifest."""

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +42,13 @@ def figure_step(run: Any, test: Any, title: str) -> Figure:
     ax.plot(d["t"], d["load"] / DEG, "C0", lw=1.4, label="load angle")
     a = d["amplitude_deg"]
     ax.axhspan(a * 0.98, a * 1.02, color="C2", alpha=0.15, label="2 % settling band")
+    limits = getattr(test, "limits", {}) or {}
+    for metric in ("rise_time", "settling_time"):  # time limits: where the step must be by
+        lim = limits.get(metric)
+        if lim is not None and lim.max is not None:
+            t_max = lim.si()[1]
+            ax.axvline(t_max, color="C3" if metric == "settling_time" else "C1", ls=":",
+                       lw=1.2, label=f"{metric} limit {t_max:.4g} s")
     _lines(ax, f"{title}\n{run.name}: {a:g} deg step", "time [s]", "position [deg]")
     ax.legend(fontsize=8, loc="lower right")
     return fig
@@ -174,11 +181,32 @@ def figure_no_load_rate(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-def test_figure(run: Any, test: Any, title: str) -> Figure:
-    """The figure of one test run (the kind's ``figure`` in :data:`acceptance.kinds.KINDS`)."""
+VERDICT_COLORS = {"PASS": "C2", "FAIL": "C3", "INCONCLUSIVE": "C1"}
+"""The colour of each result in the figures' verdict box."""
+
+
+def test_figure(run: Any, test: Any, title: str, verdicts: Sequence[Any] = ()) -> Figure:
+    """The figure of one test run (the kind's ``figure`` in :data:`acceptance.kinds.KINDS`),
+    with its limits' verdicts (``verdicts``: the rows of this test) in a box at the top right:
+    one line per limit, ``FAIL settling_time 0.42 s (<= 0.3 s)`` in red, PASS green,
+    INCONCLUSIVE orange; a failed test says FAIL in its title."""
     from ema_cli.acceptance.kinds import KINDS
 
-    return globals()[KINDS[run.kind].figure](run, test, title)
+    rows = [v for v in verdicts if v.test == run.name]
+    failed = any(v.result == "FAIL" for v in rows)
+    fig = globals()[KINDS[run.kind].figure](run, test, ("FAIL - " if failed else "") + title)
+    ax = fig.axes[0]
+    lines = [(f"{v.result} {v.metric}" + (f" ({v.condition})" if v.condition else "")
+              + f": {fmt_measured(v)} (limit {fmt_limit(v)} {v.unit})", v.result)
+             for v in rows[:8]]
+    if len(rows) > 8:
+        lines.append((f"... {len(rows) - 8} more limits (acceptance.md)", ""))
+    for k, (text, result) in enumerate(lines):
+        ax.text(0.01, 0.98 - 0.06 * k, text, transform=ax.transAxes, ha="left", va="top",
+                fontsize=8, color=VERDICT_COLORS.get(result, "k"), zorder=5,
+                fontweight="bold" if result == "FAIL" else "normal",
+                bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1})
+    return fig
 
 
 def fmt_value(v: float | None) -> str:
@@ -264,7 +292,7 @@ def write_acceptance(folder: Path, spec_yaml: str, res: Any,
     write_csv(folder / "acceptance.csv", res.to_pandas(), float_format="%.9g")
     for r in res.runs:
         write_figure(folder / f"{r.name}.png", test_figure(r, res.spec.tests[r.name],
-                                                           res.title))
+                                                           res.title, res.verdicts))
         names.append(f"{r.name}.png")
     write_text(folder / "acceptance.md", acceptance_markdown(res))
     names += ["acceptance.md", "manifest.json"]

@@ -42,8 +42,8 @@ def margins_figure(f_hz: np.ndarray, loops: Mapping[str, np.ndarray],
         mag = 20 * np.log10(np.abs(L))
         phase = np.degrees(np.unwrap(np.angle(L)))
         m = result[loop]
-        label = (f"{loop} loop: GM {m.gm_db:.3g} dB, PM {m.pm_deg:.3g} deg"
-                 if math.isfinite(m.gm_db) else f"{loop} loop: GM inf, PM {m.pm_deg:.3g} deg")
+        label = (f"{loop} loop: GM {margin_text(m.gm_db, 'gain_margin')}, "
+                 f"PM {margin_text(m.pm_deg, 'phase_margin')}")
         mag_ax.semilogx(f_hz, mag, color=color, label=label)
         ph_ax.semilogx(f_hz, phase, color=color)
         nic_ax.plot(phase, mag, color=color, label=f"{loop} loop")
