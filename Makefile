@@ -18,7 +18,7 @@ PIPI    := $(BIN)/python -m pip install -q --require-hashes --no-deps
 export NUMBA_NUM_THREADS ?= 2
 
 .DEFAULT_GOAL := help
-.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci yield-ci design-ci clean \
+.PHONY: help run test test-all bench lint reproduce reproduce-ci acceptance acceptance-ci yield-ci design-ci emps-ci clean \
         lock upgrade compile
 
 help:  ## list the targets
@@ -62,6 +62,10 @@ bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep,
 	$(BIN)/python experiments/bench_compile.py
 	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
+	$(BIN)/python experiments/bench_kernel_vs_wave3.py
+	$(BIN)/python experiments/emps_simulation.py
+	$(BIN)/python -m experiments.bench_emps_fit
+	$(BIN)/python -m experiments.plant_coverage --seeds 20
 	$(BIN)/python experiments/bench_startup.py
 	$(BIN)/python experiments/bench_acceptance.py
 	rm -rf results/bench/yield-1000
@@ -94,6 +98,12 @@ yield-ci: $(STAMP)  ## ema yield of the reference battery at a small N, its clai
 	rm -rf results/yield-ci
 	$(EMA) yield configs/acceptance.yaml --tolerances configs/tolerances.yaml --n 32 --seed 0 \
 	  --worst-budget 16 --min-yield 0.25 --out results/yield-ci
+
+emps-ci: $(STAMP)  ## ema identify plant on the EMPS record, its claims (replaces results/emps-ci)
+	rm -rf results/emps-ci
+	$(EMA) identify plant experiments/data/emps/DATA_EMPS.mat --actuator configs/actuators/emps.yaml \
+	  --out results/emps-ci
+	$(BIN)/python -m experiments.emps_claims results/emps-ci
 
 design-ci: $(STAMP)  ## ema design on the bundled log, small budget (replaces results/design-ci)
 	rm -rf results/design-ci

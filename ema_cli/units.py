@@ -55,6 +55,8 @@ LOG_UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "speed": {"rpm": (RPM, 1.0), "rad/s": (1.0, 1.0), "deg/s": (DEG, 1.0)},
     "current": {"A": (1.0, 1.0), "mA": (1.0, 1e3)},
     "voltage": {"V": (1.0, 1.0), "mV": (1.0, 1e3)},
+    "length": {"m": (1.0, 1.0), "mm": (1.0, 1e3), "um": (1.0, 1e6)},
+    "force": {"N": (1.0, 1.0), "kN": (1e3, 1.0), "N*m": (1.0, 1.0)},
 }
 """Units of a log column (``ema identify --columns CHANNEL=COLUMN:UNIT``): kind -> unit ->
 (factor, divisor), SI = value * factor / divisor. The decimal prefixes divide by an exact

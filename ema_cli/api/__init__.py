@@ -29,6 +29,12 @@ from ema_cli.api.identify_logs import (
     identify_friction_sweep,
     make_identification_data,
 )
+from ema_cli.api.identify_plant import (
+    PlantIdentification,
+    PlantValidationResult,
+    identify_plant,
+    validate_folder,
+)
 from ema_cli.api.margins import LoopMargins, margins
 from ema_cli.api.production import YieldResult, production_yield
 from ema_cli.api.reproduce import ReproduceResult, reproduce
@@ -45,6 +51,7 @@ yield_ = production_yield
 
 __all__ = ["AcceptanceResult", "ClosedLoopIdentification", "EmaError", "FrequencyResponse",
            "FrictionSweepIdentification", "Identification", "LoopMargins",
+           "PlantIdentification", "PlantValidationResult", "identify_plant", "validate_folder",
            "ReproduceResult", "Result", "Sensitivity", "Simulation", "Sweep",
            "SyntheticData", "Threshold", "TuneResult", "YieldResult", "acceptance",
            "freqresp", "identify", "identify_closed_loop", "identify_friction_sweep",

@@ -79,13 +79,15 @@ def interrupted(exc: BaseException | None = None) -> int:
     return code
 
 
-def handle_errors(fn: F) -> F:
+def handle_errors(fn: F, label: str | None = None) -> F:
     """Turn EmaError (and Ctrl-C, SIGTERM) into one clear message and an exit code, never a
     traceback: 2 (or the error's code) for EmaError, 130 for Ctrl-C, 143 for SIGTERM (also when
     the signal surfaces as another exception, e.g. a worker process it killed).
 
     The message is printed literally (escaped), so ``[dask]`` or ``[deg]`` survive rich markup.
+    Progress lines are labelled ``label`` (default: the function's name without ``_cmd``).
     """
+    label = label or fn.__name__.removesuffix("_cmd")
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -95,7 +97,7 @@ def handle_errors(fn: F) -> F:
         try:
             try:
                 sync_width()
-                with stages(fn.__name__.removesuffix("_cmd"), console, err_console):
+                with stages(label, console, err_console):
                     return fn(*args, **kwargs)
             except (typer.Exit, typer.Abort, typer.TyperException):  # usage errors: typer's
                 raise

@@ -1,7 +1,11 @@
-"""`ema identify`: identify the gear stiffness kL and half backlash alpha (paper §3.1) with a GA."""
+"""`ema identify`: its subcommands (``torque``: the gear stiffness kL and half backlash alpha,
+paper §3.1, with a GA; ``closed-loop``, ``friction-sweep``, ``make-data``: the log modes, run by
+cli/identify_logs.py) and the default command holding the earlier spelling, `ema identify
+[CONFIG] --closed-loop ...` (registered in cli/main.py, IDENTIFY_COMMANDS; cli/groups.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -23,6 +27,11 @@ if TYPE_CHECKING:
     from ema_cli.identify.torque.run import IdentificationResult
 
 Range = tuple[float, float]
+
+
+def identify_errors(fn: Callable[..., None]) -> Callable[..., None]:
+    """:func:`handle_errors` with the progress lines of every spelling labelled `identify`."""
+    return handle_errors(fn, label="identify")
 
 
 def result_table(res: IdentificationResult) -> None:
@@ -114,72 +123,89 @@ def torque_pairs(options: dict[str, Any], set_: list[str] | None,
     return pairs
 
 
-@handle_errors
+ConfigArg = Annotated[Path | None, typer.Argument(
+    help="YAML settings (e.g. configs/identify.yaml); options below override it.")]
+KRangeOpt = Annotated[Range | None, typer.Option(
+    "--k-range", metavar="LO HI", help="kL search range LO HI [N*m/rad] (default 500 700).")]
+AlphaRangeOpt = Annotated[Range | None, typer.Option(
+    "--alpha-range", metavar="LO HI",
+    help="alpha search range LO HI in rad (default 0.002 0.004).")]
+CRangeOpt = Annotated[Range | None, typer.Option(
+    "--c-range", metavar="LO HI",
+    help="c search range LO HI when fitted [N*m*s/rad] (default 0 5).")]
+RunsOpt = Annotated[int | None, typer.Option(
+    "--runs", help="GA runs with seeds SeedSequence(seed).spawn(N) (default 1).")]
+JobsOpt = Annotated[int | None, typer.Option(
+    "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1).")]
+TorqueDataOpt = Annotated[Path | None, typer.Option(
+    "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
+                   "(default: synthetic data from the simulator).")]
+NoiseOpt = Annotated[float | None, typer.Option(
+    "--noise", help="Synthetic data: Gaussian noise, % of the torque RMS (seeded).")]
+DampingOpt = Annotated[str | None, typer.Option(
+    "--damping", help="Synthetic data: damping form of the simulator, contact or paper.")]
+ModelOpt = Annotated[str | None, typer.Option(
+    "--model", help="Torque form fitted: contact (default) or paper (Eq. 2).")]
+COpt = Annotated[float | None, typer.Option(
+    "--c", help="Fix the damping c [N*m*s/rad] (default: the simulator's for synthetic "
+                "data; fitted for --data).")]
+FitCOpt = Annotated[bool | None, typer.Option(
+    "--fit-c/--no-fit-c", help="Identify c too (default: yes for --data, no otherwise).")]
+SeedOpt = Annotated[int | None, typer.Option("--seed", help="Seed of GA and noise.")]
+PopOpt = Annotated[int | None, typer.Option("--pop", help="Population size (100).")]
+GenerationsOpt = Annotated[int | None, typer.Option(
+    "--generations", help="Evaluated generations incl. the initial one (200).")]
+PcOpt = Annotated[float | None, typer.Option(
+    "--pc", help="Crossover probability per pair of parents (0.85).")]
+PmOpt = Annotated[float | None, typer.Option(
+    "--pm", help="Mutation probability (0.05): per bit for ga-paper, per gene (parameter) "
+                 "for ga.")]
+BitsOpt = Annotated[int | None, typer.Option(
+    "--bits", help="Bits per parameter, ga-paper binary coding (20).")]
+SetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", help="Override a setting by dotted path, e.g. ga.pop=50, synthetic.noise_pct=1; "
+                  "repeatable (the options above win).")]
+OutOpt = Annotated[Path | None, typer.Option("--out", help=out_help())]
+
+
+@identify_errors
 def identify_cmd(
-    config: Annotated[Path | None, typer.Argument(
-        help="YAML settings (e.g. configs/identify.yaml); options below override it.")] = None,
-    k_range: Annotated[Range | None, typer.Option(
-        "--k-range", metavar="LO HI",
-        help="kL search range LO HI [N*m/rad] (default 500 700).")] = None,
-    alpha_range: Annotated[Range | None, typer.Option(
-        "--alpha-range", metavar="LO HI",
-        help="alpha search range LO HI in rad (default 0.002 0.004).")] = None,
-    c_range: Annotated[Range | None, typer.Option(
-        "--c-range", metavar="LO HI",
-        help="c search range LO HI when fitted [N*m*s/rad] (default 0 5).")] = None,
+    config: ConfigArg = None,
+    k_range: KRangeOpt = None,
+    alpha_range: AlphaRangeOpt = None,
+    c_range: CRangeOpt = None,
     method: Annotated[str | None, typer.Option(
         "--method", help="ga (improved GA, default), ga-paper (the paper's binary GA) or "
                          "exact (least squares only); --closed-loop: shooting (default) or "
                          "ga.")] = None,
-    runs: Annotated[int | None, typer.Option(
-        "--runs", help="GA runs with seeds SeedSequence(seed).spawn(N) (default 1).")] = None,
-    n_jobs: Annotated[int | None, typer.Option(
-        "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1)."
-    )] = None,
-    data: Annotated[Path | None, typer.Option(
-        "--data", help="CSV with columns t_s, dtheta_rad, domega_rad_s, torque_nm "
-                       "(default: synthetic data from the simulator).")] = None,
+    runs: RunsOpt = None,
+    n_jobs: JobsOpt = None,
+    data: TorqueDataOpt = None,
     columns: ColumnsOpt = None,
     window: WindowOpt = None,
-    noise: Annotated[float | None, typer.Option(
-        "--noise", help="Synthetic data: Gaussian noise, % of the torque RMS (seeded).")] = None,
-    damping: Annotated[str | None, typer.Option(
-        "--damping", help="Synthetic data: damping form of the simulator, contact or paper.")
-    ] = None,
-    model: Annotated[str | None, typer.Option(
-        "--model", help="Torque form fitted: contact (default) or paper (Eq. 2).")] = None,
-    c: Annotated[float | None, typer.Option(
-        "--c", help="Fix the damping c [N*m*s/rad] (default: the simulator's for synthetic "
-                    "data; fitted for --data).")] = None,
-    fit_c: Annotated[bool | None, typer.Option(
-        "--fit-c/--no-fit-c", help="Identify c too (default: yes for --data, no otherwise)."
-    )] = None,
-    seed: Annotated[int | None, typer.Option("--seed", help="Seed of GA and noise.")] = None,
-    pop: Annotated[int | None, typer.Option("--pop", help="Population size (100).")] = None,
-    generations: Annotated[int | None, typer.Option(
-        "--generations", help="Evaluated generations incl. the initial one (200).")] = None,
-    pc: Annotated[float | None, typer.Option(
-        "--pc", help="Crossover probability per pair of parents (0.85).")] = None,
-    pm: Annotated[float | None, typer.Option(
-        "--pm", help="Mutation probability (0.05): per bit for ga-paper, per gene (parameter) "
-                     "for ga.")] = None,
-    bits: Annotated[int | None, typer.Option(
-        "--bits", help="Bits per parameter, ga-paper binary coding (20).")] = None,
-    set_: Annotated[list[str] | None, typer.Option(
-        "--set", help="Override a setting by dotted path, e.g. ga.pop=50, synthetic.noise_pct=1; "
-                      "repeatable (the options above win).")] = None,
-    out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
+    noise: NoiseOpt = None,
+    damping: DampingOpt = None,
+    model: ModelOpt = None,
+    c: COpt = None,
+    fit_c: FitCOpt = None,
+    seed: SeedOpt = None,
+    pop: PopOpt = None,
+    generations: GenerationsOpt = None,
+    pc: PcOpt = None,
+    pm: PmOpt = None,
+    bits: BitsOpt = None,
+    set_: SetOpt = None,
+    out: OutOpt = None,
     closed_loop: ClosedLoopOpt = False,
     friction_sweep: FrictionSweepOpt = False,
     make_data: MakeDataOpt = None,
     starts: StartsOpt = None,
     free: FreeOpt = None,
 ) -> None:
-    """Identify kL and alpha (and c) from transmission torque data by minimising the paper's
-    Eq. 8, J = sum (T_meas - T_model)^2, with a GA, beside the exact least-squares optimum.
-    Writes identification.json, runs.csv, history.csv, convergence.png, fit.png and
-    manifest.json. With --closed-loop, --friction-sweep or --make-data: the log
-    identifications (docs/identification.md)."""
+    """The torque-data identification (as `ema identify torque`), or with --closed-loop,
+    --friction-sweep or --make-data KIND the log modes (as `ema identify closed-loop`,
+    `friction-sweep`, `make-data KIND`): the spelling of earlier versions, every option of
+    every mode (docs/identification.md)."""
     modes = [m for m, on in (("--closed-loop", closed_loop), ("--friction-sweep", friction_sweep),
                              ("--make-data", make_data is not None)) if on]
     if modes or free:
@@ -199,6 +225,62 @@ def identify_cmd(
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")
+    run_torque(config, k_range=k_range, alpha_range=alpha_range, c_range=c_range,
+               method=method, runs=runs, n_jobs=n_jobs, data=data, columns=columns,
+               noise=noise, damping=damping, model=model, c=c, fit_c=fit_c, seed=seed,
+               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out)
+
+
+@identify_errors
+def torque_cmd(
+    config: ConfigArg = None,
+    k_range: KRangeOpt = None,
+    alpha_range: AlphaRangeOpt = None,
+    c_range: CRangeOpt = None,
+    method: Annotated[str | None, typer.Option(
+        "--method", help="ga (improved GA, default), ga-paper (the paper's binary GA) or "
+                         "exact (least squares only).")] = None,
+    runs: RunsOpt = None,
+    n_jobs: JobsOpt = None,
+    data: TorqueDataOpt = None,
+    columns: Annotated[list[str] | None, typer.Option(
+        "--columns", help="Map a column of --data, repeatable: NAME=FILE_COLUMN, e.g. "
+                          "torque_nm=T_meas.")] = None,
+    noise: NoiseOpt = None,
+    damping: DampingOpt = None,
+    model: ModelOpt = None,
+    c: COpt = None,
+    fit_c: FitCOpt = None,
+    seed: SeedOpt = None,
+    pop: PopOpt = None,
+    generations: GenerationsOpt = None,
+    pc: PcOpt = None,
+    pm: PmOpt = None,
+    bits: BitsOpt = None,
+    set_: SetOpt = None,
+    out: OutOpt = None,
+) -> None:
+    """Gear stiffness kL and half backlash alpha (and damping c) from transmission torque data
+    (paper §3.1, Eq. 8) with a GA, beside the exact least-squares optimum; synthetic data or
+    --data FILE.csv.
+
+    Minimises J = sum (T_meas - T_model)^2. Writes identification.json, runs.csv,
+    history.csv, convergence.png, fit.png and manifest.json."""
+    run_torque(config, k_range=k_range, alpha_range=alpha_range, c_range=c_range,
+               method=method, runs=runs, n_jobs=n_jobs, data=data, columns=columns,
+               noise=noise, damping=damping, model=model, c=c, fit_c=fit_c, seed=seed,
+               pop=pop, generations=generations, pc=pc, pm=pm, bits=bits, set_=set_, out=out)
+
+
+def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range | None,
+               c_range: Range | None, method: str | None, runs: int | None,
+               n_jobs: int | None, data: Path | None, columns: list[str] | None,
+               noise: float | None, damping: str | None, model: str | None, c: float | None,
+               fit_c: bool | None, seed: int | None, pop: int | None,
+               generations: int | None, pc: float | None, pm: float | None,
+               bits: int | None, set_: list[str] | None, out: Path | None) -> None:
+    """Check the options of the torque-data identification, run it, write its folder and
+    print its table (both spellings: `ema identify torque` and `ema identify [CONFIG]`)."""
     from ema_cli.api.identification import identification_inputs, identify, load_settings
     from ema_cli.report.rundir import check_output
 
@@ -233,6 +315,108 @@ def identify_cmd(
     folder = ident.save(out)
 
     print_identification(ident, folder)
+
+
+LogDataOpt = Annotated[Path | None, typer.Option(
+    "--data", help="The closed-loop log: .csv, .parquet or .mat (MATLAB v5/v7.3) with t_s, "
+                   "theta_ref_deg, theta_load_deg [, omega_motor_rpm, current_a, "
+                   "voltage_cmd_v], or mapped by --columns.")]
+LogSetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", help="Override a setting by dotted path, e.g. plant.contact_tau=1e-4, "
+                  "shooting.starts=4; repeatable (the options above win).")]
+
+
+@identify_errors
+def closed_loop_cmd(
+    config: Annotated[Path | None, typer.Argument(
+        help="YAML settings of the closed-loop fit; options below override it.")] = None,
+    data: LogDataOpt = None,
+    columns: Annotated[list[str] | None, typer.Option(
+        "--columns", help="Map a log column, repeatable: CHANNEL=COLUMN[:UNIT], e.g. "
+                          "theta_load_deg=pos:rad, t_s=time:ms; units: time s|ms|us, angle "
+                          "deg|rad|mrad, speed rpm|rad/s|deg/s, current A|mA, voltage V|mV "
+                          "(default: the channel's own).")] = None,
+    window: Annotated[str | None, typer.Option(
+        "--window", metavar="T0,T1",
+        help="Fit only the samples with T0 <= t <= T1, in seconds of the log's own time "
+             "(e.g. 0.5,2.5); it must lie within the log.")] = None,
+    method: Annotated[str | None, typer.Option(
+        "--method", help="shooting (multiple shooting from Sobol starts, default) or ga (GA "
+                         "then least squares).")] = None,
+    starts: Annotated[int | None, typer.Option(
+        "--starts", help="Starts of the multiple-shooting search (8).")] = None,
+    free: Annotated[list[str] | None, typer.Option(
+        "--free", help="Free a parameter with bounds, NAME=LO,HI in SI (e.g. Fs=0,0.2); "
+                       "repeatable; added to the default set kL, alpha, Fc, sigma2 (a "
+                       "config's free: replaces it).")] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", help="Seed of the search's starts.")] = None,
+    pop: Annotated[int | None, typer.Option(
+        "--pop", help="--method ga: population size (selects the GA).")] = None,
+    generations: Annotated[int | None, typer.Option(
+        "--generations", help="--method ga: evaluated generations (selects the GA).")] = None,
+    set_: LogSetOpt = None,
+    out: OutOpt = None,
+) -> None:
+    """Output-error fit of the whole simulator to a closed-loop log (--data LOG) by multiple
+    shooting: kL, alpha, Fc, sigma2 (and --free more), 95 % intervals and a verdict.
+
+    Writes identification.json, fit_<channel>.png, alpha_profile.png, fitted.yaml (runs with
+    `ema simulate`), summary.md and manifest.json (docs/identification.md)."""
+    from ema_cli.cli.identify_logs import run_log_mode
+
+    run_log_mode(["--closed-loop"], config=config, data=data, noise=None, seed=seed, pop=pop,
+                 generations=generations, set_=set_, out=out, free=free, make_data=None,
+                 columns=columns, window=window, method=method, starts=starts, torque_only=[])
+
+
+@identify_errors
+def friction_sweep_cmd(
+    config: Annotated[Path | None, typer.Argument(
+        help="YAML settings of the friction fit; options below override it.")] = None,
+    data: Annotated[Path | None, typer.Option(
+        "--data", help="The sweep: CSV with omega_rpm, torque_nm (steady friction torque at "
+                       "constant motor speeds).")] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Override a setting by dotted path; repeatable.")] = None,
+    out: OutOpt = None,
+) -> None:
+    """Fit the static LuGre curve (Fc, Fs, vs, sigma2) to a constant-speed friction sweep
+    (--data SWEEP.csv) by variable projection, with standard errors.
+
+    Writes identification.json, friction_fit.png, summary.md and manifest.json."""
+    from ema_cli.cli.identify_logs import run_log_mode
+
+    run_log_mode(["--friction-sweep"], config=config, data=data, noise=None, seed=None,
+                 pop=None, generations=None, set_=set_, out=out, free=None, make_data=None,
+                 torque_only=[])
+
+
+@identify_errors
+def make_data_cmd(
+    kind: Annotated[str, typer.Argument(
+        help="closed-loop (a 4 s chirp log) or friction-sweep.")],
+    config: Annotated[Path | None, typer.Argument(
+        help="YAML settings of the synthetic data; options below override it.")] = None,
+    noise: Annotated[float | None, typer.Option(
+        "--noise", help="Gaussian noise on every channel, % of its RMS (seeded).")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="Seed of the noise.")] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Override a setting by dotted path, e.g. plant.kL=600, duration_s=2; "
+                      "repeatable.")] = None,
+    out: OutOpt = None,
+) -> None:
+    """Write a synthetic log with stated truths (KIND: closed-loop or friction-sweep), to try
+    `ema identify closed-loop` or `friction-sweep` on.
+
+    Writes closed_loop.csv or friction_sweep.csv, <stem>.truth.json and manifest.json."""
+    from ema_cli.cli.identify_logs import MAKE_KINDS, run_log_mode
+
+    if kind not in MAKE_KINDS:
+        raise EmaError(f"make-data KIND: expected {' or '.join(MAKE_KINDS)}, got {kind!r}")
+    run_log_mode(["--make-data"], config=config, data=None, noise=noise, seed=seed, pop=None,
+                 generations=None, set_=set_, out=out, free=None, make_data=kind,
+                 torque_only=[])
 
 
 def print_identification(ident: Identification, folder: Path) -> None:

@@ -16,6 +16,7 @@ from ema_cli.cli import (
     design,
     freqresp,
     identify,
+    identify_plant,
     locations,
     margins,
     production,
@@ -26,6 +27,7 @@ from ema_cli.cli import (
     threshold,
     tune,
 )
+from ema_cli.cli.groups import command_group
 
 app = typer.Typer(
     name="ema",
@@ -70,7 +72,30 @@ COMMANDS = (
     ("params", locations.params_cmd),
     ("compile", compiling.compile_cmd),
 )
-"""(name, function) of every command, in the order ``ema --help`` lists them."""
+"""(name, function) of every command, in the order ``ema --help`` lists them. A command with
+subcommands in ``GROUPS`` is a group whose default (no subcommand named) is this function."""
+
+IDENTIFY_COMMANDS = (
+    ("torque", identify.torque_cmd),
+    ("closed-loop", identify.closed_loop_cmd),
+    ("friction-sweep", identify.friction_sweep_cmd),
+    ("make-data", identify.make_data_cmd),
+    ("plant", identify_plant.plant),
+    ("validate", identify_plant.validate_cmd),
+)
+"""The subcommands of `ema identify`, in the order its help lists them: one line each."""
+
+GROUPS = {
+    "identify": (IDENTIFY_COMMANDS,
+                 "Identify the actuator's parameters: from torque data (torque), a closed-loop "
+                 "log (closed-loop), a friction sweep (friction-sweep), a rigid axis's measured "
+                 "record (plant; validate checks it on another record); make-data writes "
+                 "synthetic data to try them on. `ema identify [CONFIG] [OPTIONS]` without a "
+                 "command runs the torque identification, or a log mode with --closed-loop, "
+                 "--friction-sweep or --make-data KIND (the spelling of earlier versions). "
+                 "Each command's --help lists its options."),
+}
+"""(subcommands, help) of each command that is a group (cli/groups.py)."""
 
 SHORT_HELP = {
     "simulate": "Simulate one configuration: signals, metrics, a figure.",
@@ -95,7 +120,12 @@ SHORT_HELP = {
 first sentence, cut by the help formatter, is not)."""
 
 for _name, _fn in COMMANDS:
-    app.command(_name, short_help=SHORT_HELP[_name])(_fn)
+    if _name in GROUPS:
+        _subs, _help = GROUPS[_name]
+        app.add_typer(command_group(_name, _fn, _subs, _help), name=_name,
+                      short_help=SHORT_HELP[_name])
+    else:
+        app.command(_name, short_help=SHORT_HELP[_name])(_fn)
 
 
 FAST_EXIT = frozenset({"simulate", "validate", "show", "threshold", "margins", "freqresp",

@@ -121,3 +121,24 @@ def test_the_check_sees_a_command_that_skips_the_api():
     bad = [f for f in found if f.split(".")[1] in COMPUTE
            or f.split(".")[-1].startswith(WRITERS)]
     assert len(bad) == 2
+
+
+SUB_ROUTES = {
+    ("identify", "torque"): "ema_cli.api.identification.identify",
+    ("identify", "closed-loop"): "ema_cli.api.identify_logs.identify_closed_loop",
+    ("identify", "friction-sweep"): "ema_cli.api.identify_logs.identify_friction_sweep",
+    ("identify", "make-data"): "ema_cli.api.identify_logs.make_identification_data",
+}
+"""The API function each subcommand's route goes through (cli.main.GROUPS)."""
+
+
+@pytest.mark.parametrize(("group", "sub"), [(g, n) for g, (subs, _) in main.GROUPS.items()
+                                            for n, _ in subs])
+def test_every_subcommand_goes_through_its_api_function(group, sub):
+    assert (group, sub) in SUB_ROUTES, f"`ema {group} {sub}`: add its API function to SUB_ROUTES"
+    fn = dict(main.GROUPS[group][0])[sub]
+    names = set(_imports(fn))
+    bad = [f for f in sorted(names - ALLOWED_MODEL)
+           if f.split(".")[1] in COMPUTE or f.startswith("ema_cli.config.loader")
+           or (f.split(".")[1] == "report" and f.split(".")[-1].startswith(WRITERS))]
+    assert bad == [] and SUB_ROUTES[(group, sub)] in names, f"`ema {group} {sub}`: {bad}"

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -198,3 +199,121 @@ def read_plant_mat(path: str | Path, variables: dict[str, str] | None = None,
     names = {**names, "force": f"{names['gain']}*{names['actuation']}"}
     return PlantRecord(t, q, gain * u, h, source, names, one_based=True, reference_m=ref,
                        constants=constants)
+
+
+ROLE_KINDS: dict[str, tuple[str, ...]] = {
+    "time": ("time",),
+    "position": ("length", "angle"),
+    "reference": ("length", "angle"),
+    "actuation": ("voltage", "current", "force"),
+    "disturbance": ("voltage", "current", "force"),
+}
+"""The roles of a record's channels -> the kinds of unit each takes (``ema_cli.units.LOG_UNITS``);
+``gain`` (a variable or a number) converts the actuation into a force."""
+ROLE_DEFAULTS = {"time": "t", "position": "qm", "actuation": "vir", "reference": "qg",
+                 "gain": "gtau"}
+"""Each role's variable when no column map names it (the EMPS benchmark's names)."""
+
+
+def parse_role_spec(role: str, spec: str) -> tuple[str, str | None]:
+    """``NAME[:UNIT]`` of a record role -> (name, unit or None: SI); errors name the role and
+    the units it takes."""
+    from ema_cli.units import LOG_UNITS
+
+    if role not in (*ROLE_KINDS, "gain"):
+        raise EmaError(f"--columns {role}=...: unknown role '{role}'; expected one of "
+                       f"{', '.join([*ROLE_KINDS, 'gain'])}")
+    name, sep, unit = str(spec).rpartition(":")
+    if not sep or role == "gain":
+        return str(spec).strip(), None
+    name, unit = name.strip(), unit.strip()
+    kinds = ROLE_KINDS[role]
+    if not any(unit in LOG_UNITS[k] for k in kinds):
+        allowed = ", ".join(u for k in kinds for u in LOG_UNITS[k])
+        raise EmaError(f"--columns {role}={spec}: unknown unit '{unit}' for the {role}; "
+                       f"expected one of {allowed}")
+    return name, unit
+
+
+def _to_si(v: np.ndarray, unit: str | None, role: str) -> np.ndarray:
+    from ema_cli.units import LOG_UNITS, log_to_si
+
+    if unit is None:
+        return v
+    kind = next(k for k in ROLE_KINDS[role] if unit in LOG_UNITS[k])
+    return np.asarray(log_to_si(v, unit, kind), dtype=np.float64)
+
+
+def read_plant_record(path: str | Path, columns: dict[str, str] | None = None,
+                      gain: float | None = None, saturation: float | None = None,
+                      need_reference: bool = True, limit_force: float | None = None
+                      ) -> tuple[PlantRecord, dict[str, Any]]:
+    """A closed-loop record in any log format (CSV, Parquet, MATLAB v5/v7.3) -> (record,
+    extras). ``columns`` maps roles (:data:`ROLE_KINDS` and ``gain``) to ``NAME[:UNIT]`` (default
+    :data:`ROLE_DEFAULTS`, the EMPS names; no unit: SI). The force is ``gain * actuation``
+    with the gain from the record's variable (``gain=NAME``, EMPS ``gtau``) when it has one,
+    else ``gain`` [N per unit of actuation] (the description's amplifier), else 1 for an
+    actuation in N. ``extras``: ``actuation`` (the command as logged, its unit), ``gain``,
+    ``disturbance`` (a logged input added to the controller's output, or None). ``saturation``
+    the command's limit (its units), ``limit_force`` the same as a force [N] for an actuation
+    logged as a force. Every problem is one EmaError naming the file, the variable and the
+    sample."""
+    from ema_cli.identify.logs.channels import read_log_table
+
+    spec = {**ROLE_DEFAULTS, **(columns or {})}
+    roles = {r: parse_role_spec(r, s) for r, s in spec.items()}
+    table = read_log_table(path)
+    source = f"data file '{table.path}'"
+    one_based = table.path.suffix.lower() == ".mat"
+    names = {r: n for r, (n, _) in roles.items()}
+    needed = {"time": "the time", "position": "the measured position",
+              "actuation": "the actuation (controller output or force)"}
+    if need_reference:
+        needed["reference"] = "the reference position (the closed loop's input)"
+    for role, meaning in needed.items():
+        if names[role] not in table.raw:
+            given = " (--columns " + role + "=" + spec[role] + ")" if columns and role in columns \
+                else f"; name it with --columns {role}=NAME[:UNIT]"
+            raise EmaError(f"{source} has no variable '{names[role]}' ({meaning}){given}; it "
+                           f"has {table.listing()}")
+    vals = {r: _to_si(table.column(names[r]), roles[r][1], r) for r in
+            ("time", "position", "actuation", "reference", "disturbance")
+            if r in names and names[r] in table.raw}
+    unit_a = roles["actuation"][1] or "V"
+    g_name = names.get("gain")
+    if g_name and g_name in table.raw:
+        g = _scalar(table, g_name, "the actuation's force gain")
+        g_from = f"variable '{g_name}'"
+    elif unit_a in ("N", "kN", "N*m"):
+        g, g_from = 1.0, "the actuation is a force"
+    elif gain is not None:
+        g, g_from = float(gain), "the description's drive gain"
+    else:
+        raise EmaError(f"{source}: no gain converts the actuation '{names['actuation']}' "
+                       f"[{unit_a}] into a force: the record has no variable '{g_name}' and the "
+                       "description's drive has none; give --columns gain=NAME or an amplifier "
+                       "drive with a gain")
+    if g == 0:
+        raise EmaError(f"{source}: the actuation's gain ({g_from}) is 0; expected nonzero")
+    t, q, u = vals["time"], vals["position"], vals["actuation"]
+    if unit_a in ("N", "kN", "N*m"):  # a force: its limit is the command's times the gain
+        saturation = limit_force
+    h = check_signals(source, names, t, q, u, one_based, saturation)
+    ref = vals.get("reference")
+    for role in ("reference", "disturbance"):
+        v = vals.get(role)
+        if v is not None and v.shape != q.shape:
+            raise EmaError(f"{source}: variable '{names[role]}' has {v.size} samples but "
+                           f"'{names['position']}' has {q.size}; expected one length")
+        if v is not None and not np.all(np.isfinite(v)):
+            i = int(np.flatnonzero(~np.isfinite(v))[0])
+            raise EmaError(f"{source}: variable '{names[role]}' is NaN or inf at "
+                           f"{sample_name(i, one_based)}; expected finite values")
+    constants = {c: _scalar(table, c, "a controller constant") for c in EMPS_CONSTANTS
+                 if c in table.raw and table.column(c).size == 1}
+    rec = PlantRecord(t - t[0], q, g * u, h, source,
+                      {**names, "force": f"gain*{names['actuation']}"},
+                      one_based=one_based, reference_m=ref, constants=constants)
+    extras = {"actuation": u, "unit": unit_a, "gain": g, "gain_from": g_from,
+              "disturbance": vals.get("disturbance")}
+    return rec, extras

@@ -1,0 +1,562 @@
+"""Plant identification of a rigid axis from a closed-loop record: IDIM-LS as the start and the
+baseline, the controller checked against the log, output-error refinement in closed loop
+(``plant.output_error``), a two-part verdict (determined: cluster-robust intervals; adequate:
+``plant.adequacy``) and validation on samples the fit did not use (a time split) or on
+another record (:func:`validate`).
+
+What the description must be: a rigid axis (one mass), a force or current amplifier, the
+friction law at the load (Coulomb + viscous with static = Coulomb, or with a Stribeck peak: its
+Coulomb and viscous levels are freed), and a discrete controller (the closed loop is simulated
+from the record's reference). Anything else is refused with the key to change.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ema_cli.errors import EmaError
+from ema_cli.identify.plant import adequacy as adq
+from ema_cli.identify.plant import output_error as oe
+from ema_cli.identify.plant.benchmark import BenchmarkErrors, relative_error_pct
+from ema_cli.identify.plant.controller_check import (
+    ControllerCheck,
+    check_controller,
+    chosen_delay,
+)
+from ema_cli.identify.plant.idim import BENCHMARK, IdimEstimate, filtered_kinematics, idim_ls
+from ema_cli.identify.plant.records import PlantRecord, read_plant_record
+from ema_cli.identify.plant.settings import PlantSettings
+from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
+
+LAWS = ("auto", "symmetric", "per-direction")
+SUBSTEPS = 10  # kernel steps per controller sample (a rigid axis' own time constant is long)
+MIN_CLUSTERS = 20  # independent residual blocks a verdict needs [-]
+BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
+BLOCK_MIN_S = 0.25  # ... and at least this long [s]
+SAMPLE_TOL = 0.01  # the record's sample interval may differ from the controller's by 1 % [-]
+LAW_TERMS = {"symmetric": ("M", "Fv", "Fc", "OF"), "per-direction": ("M", "Fv+", "Fc+", "Fv-",
+                                                                    "Fc-")}
+
+
+@dataclass
+class LawFit:
+    """One law fitted by output error: the IDIM-LS start, the fit, its uncertainty and
+    adequacy, and the simulated channels at the estimate."""
+
+    law: str
+    start: IdimEstimate
+    fit: oe.OutputErrorFit
+    uncertainty: Uncertainty
+    adequacy: adq.Adequacy
+    clusters: int
+    block_s: float
+    F: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    on_bound: np.ndarray
+
+    @property
+    def estimate(self) -> dict[str, float]:
+        """Term -> value (SI)."""
+        return {n: float(v) for n, v in zip(self.fit.names, self.fit.x, strict=True)}
+
+    def status(self, j: int) -> str:
+        """Parameter j: ``determined``, ``zero within its interval`` (a force term of the law
+        the data do not need), ``on its bound`` or ``NOT DETERMINED: why``."""
+        u = self.uncertainty
+        n = u.names[j]
+        if n not in oe.TERM_PARAMS and self.on_bound[j]:
+            return "NOT DETERMINED: on its bound"
+        zero = bool(np.isfinite(u.se[j]) and u.ci_low[j] <= 0 <= u.ci_high[j])
+        if zero and n in oe.TERM_PARAMS and n != "M":
+            return "zero within its interval"
+        if u.determined[j] and not zero:
+            return "determined"
+        why = list(u.reasons[j]) or ["its 95 % interval contains 0"]
+        return "NOT DETERMINED: " + "; ".join(why)
+
+    def determined(self) -> tuple[bool, list[str]]:
+        """(every parameter determined or zero within its interval, the undetermined ones)."""
+        u = self.uncertainty
+        bad = [n for j, n in enumerate(u.names) if self.status(j).startswith("NOT")]
+        return not bad, bad
+
+
+@dataclass
+class PlantFit:
+    """The identification (module docstring). ``laws`` every law fitted, ``chosen`` the one
+    reported, ``baseline`` IDIM-LS of the symmetric law (the benchmark's reference model),
+    ``errors`` the benchmark's relative errors on the fitted samples (``output error`` and
+    ``IDIM-LS``), ``split`` the time-split validation, ``t`` and the measured channels."""
+
+    settings: PlantSettings
+    record: PlantRecord
+    extras: dict[str, Any]
+    axis: str
+    controller: ControllerCheck | None
+    delay: int
+    baseline: IdimEstimate
+    laws: dict[str, LawFit]
+    chosen: str
+    choice: str
+    errors: dict[str, BenchmarkErrors]
+    baseline_sim: dict[str, np.ndarray]
+    split: dict[str, Any] | None
+    use: np.ndarray
+    timings: dict[str, float]
+    kernel: dict[str, float]
+    mode: str = "closed-loop output error"
+
+    @property
+    def best(self) -> LawFit:
+        """The chosen law's fit."""
+        return self.laws[self.chosen]
+
+
+def _description(settings: PlantSettings) -> tuple[Any, dict[str, Any], Callable, dict]:
+    """The description -> (config, base overrides, resolver, resolved params); refuses what
+    the plant fit cannot run, naming the key."""
+    from ema_cli.config.actuator import Actuator
+    from ema_cli.config.base import Strict
+    from ema_cli.config.loader import load_config, resolve_params
+
+    class Described(Strict):
+        """An actuator description alone (no run: the record is the input)."""
+
+        actuator: Actuator
+
+        @property
+        def axis(self) -> str:
+            """rotary or translational."""
+            return self.actuator.axis
+
+    p = Path(settings.actuator)
+    if not p.is_file():
+        raise EmaError(f"--actuator: the actuator description '{p}' does not exist")
+    cfg = load_config({"actuator": str(p.resolve())}, settings.overrides(), Described)
+    base = cfg.actuator.params()
+    nl, fr = {}, "sigma2"
+
+    def resolve(raw: dict[str, Any]) -> dict[str, float]:
+        return resolve_params(raw, nl, fr)
+
+    prm = resolve(base)
+    where = f"actuator description '{p.name}'"
+    if prm.get("rigid") != 1.0:
+        raise EmaError(f"{where}: transmission.type must be rigid for a plant fit (one mass: "
+                       "M q'' = F - friction - offset); a compliant axis is identified with "
+                       "`ema identify --closed-loop`")
+    if prm.get("drive") != 1.0:
+        raise EmaError(f"{where}: drive.type must be amplifier (the record's actuation is a "
+                       "force or a current times a gain)")
+    if prm.get("friction_L", 0.0) == 0.0:
+        raise EmaError(f"{where}: friction.load.law is none; the plant fit frees the load's "
+                       "Coulomb and viscous friction: give law coulomb (or stribeck)")
+    if prm.get("friction_L") not in (1.0, 2.0):
+        raise EmaError(f"{where}: friction.load.law must be coulomb, stribeck or lugre for a "
+                       "plant fit")
+    if prm.get("friction_L") == 1.0 and settings.law == "per-direction":
+        raise EmaError(f"{where}: friction.load.law is lugre, a symmetric law; expected --law "
+                       "symmetric or auto (or a coulomb/stribeck law per direction)")
+    if prm.get("friction", 0.0) != 0.0:
+        raise EmaError(f"{where}: friction.motor is set; the plant fit frees the friction at "
+                       "the load (in load units): move it to friction.load")
+    return cfg, base, resolve, prm
+
+
+def _signal(record: PlantRecord, ts: float, disturbance: np.ndarray | None) -> Any:
+    """The record's reference (and logged disturbance) as the kernel's input: sample k at
+    ``k*ts`` (the controller's clock)."""
+    from ema_cli.sim.signals import InputSignal
+
+    tk = tuple(np.arange(record.n) * ts)
+    ext = None if disturbance is None else (tk, tuple(disturbance))
+    return InputSignal(kind="csv", table=(tk, tuple(record.reference_m)),
+                       path=record.source, ext_table=ext, ext_hold=True,
+                       ext_name=None if ext is None else record.names.get("disturbance"))
+
+
+def _plant(settings: PlantSettings, base: dict, resolve: Callable, prm: dict,
+           record: PlantRecord, extras: dict, delay: int, names: tuple[str, ...]
+           ) -> oe.ClosedLoopPlant:
+    ts = prm["Ts"]
+    base = {**base, "dc_delay": float(delay), "x0_theta_L": float(record.q_m[0]),
+            "x0_theta_m": float(record.q_m[0]) * prm.get("m", 1.0)}
+    if extras.get("disturbance") is not None:
+        base["dist_out"] = 1.0
+    if "OF" not in names:  # a law without the offset: its per-direction Coulomb levels carry it
+        base["offset"] = 0.0
+    static_follows = base.get("Fs_L") == base.get("Fc_L")
+    mass_extra = prm.get("m", 1.0) ** 2 * prm.get("Jm", 0.0)
+    return oe.ClosedLoopPlant(base, resolve, _signal(record, ts, extras.get("disturbance")),
+                              ts / SUBSTEPS, (record.n - 1) * SUBSTEPS, SUBSTEPS, record.n, names,
+                              static_follows, mass_extra)
+
+
+def _kinematics(plant: oe.ClosedLoopPlant, x: np.ndarray, prm: dict) -> tuple[np.ndarray, ...]:
+    """(F, q, v, a) simulated at ``x`` (``ClosedLoopPlant.motion``)."""
+    return plant.motion(np.asarray(x, dtype=np.float64))
+
+
+def _mask(record: PlantRecord, window: tuple[float, float] | None, first: int) -> np.ndarray:
+    use = np.ones(record.n, dtype=bool)
+    use[:first] = False
+    if window is not None:
+        t0, t1 = window
+        if not (t0 < t1):
+            raise EmaError(f"--window {t0:g},{t1:g}: expected T0 < T1 [s]")
+        if t0 < record.t_s[0] or t1 > record.t_s[-1] + 1e-9:
+            raise EmaError(f"--window {t0:g},{t1:g}: {record.source} spans 0 to "
+                           f"{record.t_s[-1]:.6g} s; expected a window inside it")
+        use &= (record.t_s >= t0) & (record.t_s <= t1)
+    return use
+
+
+def benchmark_errors_on(record: PlantRecord, idx: np.ndarray, q_s: np.ndarray,
+                        v_s: np.ndarray, a_s: np.ndarray, F_s: np.ndarray) -> BenchmarkErrors:
+    """The benchmark's four relative errors [%] (``Simulation_EMPS.m``: simulated against the
+    filtered measured motion and the measured force) over the samples ``idx``."""
+    kin = filtered_kinematics(record.q_m, record.h_s, BENCHMARK)
+    pairs = ((kin.q_m, q_s), (kin.dq_m_s, v_s), (kin.ddq_m_s2, a_s), (record.force_n, F_s))
+    e = [relative_error_pct(m[idx], s[idx]) for m, s in pairs]
+    return BenchmarkErrors(*e)
+
+
+def _uncertainty(fit: oe.OutputErrorFit, use: np.ndarray, h: float
+                 ) -> tuple[Uncertainty, list[np.ndarray], float]:
+    m = int(np.count_nonzero(use))
+    tc = max(oe.correlation_time(fit.r[:m], h), oe.correlation_time(fit.r[m:], h))
+    block = max(BLOCK_CORR * tc, BLOCK_MIN_S)
+    block = min(block, max(m * h / MIN_CLUSTERS, h))  # at least MIN_CLUSTERS blocks if possible
+    clusters = oe.time_clusters(use, h, block)
+    cov, cond, dof = covariance_clustered(fit.J, fit.r, clusters)
+    return assess(fit.names, fit.x, cov, dof, cond), clusters, block
+
+
+def _adequacy(record: PlantRecord, law: str, fit: oe.OutputErrorFit, F: np.ndarray,
+              q: np.ndarray, use: np.ndarray, clusters: list[np.ndarray], block_s: float,
+              v_unit: str = "m/s") -> adq.Adequacy:
+    m = int(np.count_nonzero(use))
+    t = record.t_s[use]
+    rF = record.force_n[use] - F[use]
+    rq = record.q_m[use] - q[use]
+    kin = filtered_kinematics(record.q_m, record.h_s, BENCHMARK)
+    v = kin.dq_m_s[use]
+    vr = np.gradient(record.reference_m, record.h_s)[use]
+    force_clusters = [c[c < m] for c in clusters]
+    tests = [adq.correlation_test("force residual: autocorrelation", rF),
+             adq.correlation_test("position residual: autocorrelation", rq),
+             adq.correlation_test("force residual x reference velocity", rF, vr),
+             adq.correlation_test("position residual x reference velocity", rq, vr)]
+    a = adq.Adequacy(
+        fit_pct={"force": adq.fit_percent(record.force_n[use], F[use]),
+                 "position": adq.fit_percent(record.q_m[use], q[use])},
+        tests=tests,
+        omitted=adq.omitted_terms(rF, v, LAW_TERMS.get(law, fit.names), force_clusters,
+                                  v_unit),
+        ranges={"force": adq.failing_ranges(t, rF, block_s),
+                "position": adq.failing_ranges(t, rq, block_s)},
+        motion=adq.by_motion(rF, v),
+        correlation_time_s={"force": oe.correlation_time(fit.r[:m], record.h_s),
+                            "position": oe.correlation_time(fit.r[m:], record.h_s)})
+    return adq.judge(a, len(clusters), MIN_CLUSTERS)
+
+
+def _sliced(record: PlantRecord, use: np.ndarray) -> PlantRecord:
+    """The record restricted to the contiguous span of ``use`` (for IDIM-LS on a window)."""
+    idx = np.flatnonzero(use)
+    a, b = int(idx[0]), int(idx[-1]) + 1
+    a = max(a - BENCHMARK.first_sample, 0)  # IDIM drops its own border from the span's start
+    return PlantRecord(record.t_s[a:b], record.q_m[a:b], record.force_n[a:b], record.h_s,
+                       record.source, record.names, record.one_based,
+                       None if record.reference_m is None else record.reference_m[a:b],
+                       record.constants)
+
+
+def _fit_law(law: str, record: PlantRecord, use: np.ndarray, plant_of: Callable,
+             ch_floor: tuple[float, float], max_iter: int, progress: Callable | None,
+             free: Mapping[str, tuple[float, float]], prm: Mapping[str, float]
+             ) -> tuple[IdimEstimate, oe.OutputErrorFit, oe.ClosedLoopPlant]:
+    law_terms = LAW_TERMS[law]
+    start = idim_ls(_sliced(record, use), law_terms)
+    terms = (*law_terms, *free)
+    plant = plant_of(terms)
+    ch = oe.Channels(record.force_n, record.q_m, use, *ch_floor)
+    x_extra = np.array([min(max(float(prm.get(n, 0.0)), lo), hi) for n, (lo, hi) in
+                        free.items()])
+    x0 = np.concatenate([start.theta, x_extra])
+    scale = np.concatenate([np.maximum(10.0 * start.std, 1e-3 * np.abs(start.theta)),
+                            [max(0.05 * abs(x), 1e-3 * (hi - lo)) for x, (lo, hi) in
+                             zip(x_extra, free.values(), strict=True)]])
+    scale = np.where(scale > 0, scale, 1.0)
+    lower = np.where(np.array([n in ("M",) or n.startswith("Fv") or n.startswith("Fc")
+                               for n in law_terms]), 0.0, -np.inf)
+    lower[np.array([n == "M" for n in law_terms])] = 1e-9 * max(abs(start.theta[0]), 1.0)
+    lower = np.concatenate([lower, [lo for lo, _ in free.values()]])
+    upper = np.concatenate([np.full(len(law_terms), np.inf), [hi for _, hi in free.values()]])
+
+    def step(i: int, n: int, cost: float) -> None:
+        if progress is not None:
+            progress(f"output error ({law})", i, n)
+
+    fit = oe.fit(plant, ch, x0, scale, lower, upper, max_iter=max_iter, progress=step)
+    return start, fit, plant
+
+
+def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int | None], None]
+              | None = None) -> PlantFit:
+    """The whole identification (module docstring) -> :class:`PlantFit`."""
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    cfg, base, resolve, prm = _description(settings)
+    umax = prm.get("dc_umax", np.inf)
+    record, extras = read_plant_record(settings.data, dict(settings.columns),
+                                       gain=prm.get("amp_gain"),
+                                       saturation=umax if np.isfinite(umax) else None,
+                                       limit_force=(umax * prm.get("amp_gain", 1.0)
+                                                    if np.isfinite(umax) else None),
+                                       need_reference=False)
+    why_open = ("the record has no reference channel" if record.reference_m is None else
+                "the description has no discrete controller" if prm.get("ctrl") != 1.0 else "")
+    if why_open:
+        return _run_inverse(settings, cfg, record, extras, why_open, t0)
+    ts = prm["Ts"]
+    if abs(record.h_s / ts - 1.0) > SAMPLE_TOL:
+        raise EmaError(f"{record.source}: samples every {record.h_s:.6g} s but the described "
+                       f"controller samples every {ts:.6g} s (controller.sample_time_s); "
+                       "expected the controller's own samples")
+    first = BENCHMARK.first_sample
+    check = check_controller(prm, record.q_m, record.reference_m, extras["actuation"],
+                             extras["unit"], extras.get("disturbance"), first=first)
+    delay = chosen_delay(check, settings.delay, record.source)
+    timings["read_and_check"] = time.perf_counter() - t0
+    use = _mask(record, settings.window, first)
+    # the slowest time constant to identify, from the description's nominal values
+    mass = prm.get("JL", 0.0) + prm.get("m", 1.0) ** 2 * prm.get("Jm", 0.0)
+    fv = max(prm.get("Fv_L", 0.0), prm.get("Fv_L_neg", 0.0))
+    tau = mass / fv if fv > 0 else 0.0
+    span = float(np.count_nonzero(use) * record.h_s)
+    if span < max(tau, 0.0) or np.count_nonzero(use) < 100:
+        raise EmaError(f"{record.source}: the fitted samples span {span:.4g} s "
+                       f"({np.count_nonzero(use)} samples), shorter than the axis' mechanical "
+                       f"time constant M/Fv = {tau:.4g} s (the slowest to identify; at least 100 "
+                       "samples); expected a longer --window")
+    baseline = idim_ls(_sliced(record, use), LAW_TERMS["symmetric"])
+    floors = (oe.command_floor(record.force_n), oe.encoder_floor(record.q_m))
+
+    def plant_of(terms: tuple[str, ...]) -> oe.ClosedLoopPlant:
+        return _plant(settings, base, resolve, prm, record, extras, delay, terms)
+
+    laws: dict[str, LawFit] = {}
+    kernel = {"calls": 0, "lanes": 0, "kernel_s": 0.0, "load_s": 0.0}
+    order = ["symmetric", "per-direction"] if settings.law == "auto" else [settings.law]
+    if prm.get("friction_L") == 1.0:  # LuGre: symmetric only
+        order = ["symmetric"]
+    for law in order:
+        t1 = time.perf_counter()
+        start, fit, plant = _fit_law(law, record, use, plant_of, floors, settings.max_iter,
+                                     progress, settings.free, prm)
+        unc, clusters, block = _uncertainty(fit, use, record.h_s)
+        F, q, v, a = _kinematics(plant, fit.x, prm)
+        adequacy = _adequacy(record, law, fit, F, q, use, clusters, block,
+                             "rad/s" if cfg.axis == "rotary" else "m/s")
+        laws[law] = LawFit(law, start, fit, unc, adequacy, len(clusters), block, F, q, v, a,
+                           _on_bound(fit, settings.free))
+        for k, val in (("calls", plant.calls), ("lanes", plant.lanes_run),
+                       ("kernel_s", plant.kernel_s), ("load_s", plant.load_s)):
+            kernel[k] += val
+        timings[f"fit_{law}"] = time.perf_counter() - t1
+    chosen, choice = _choose(settings.law, laws)
+    # the baseline: IDIM-LS of the symmetric law simulated in the same closed loop
+    bplant = plant_of(LAW_TERMS["symmetric"])
+    bF, bq, bv, ba = _kinematics(bplant, baseline.theta, prm)
+    idx = np.flatnonzero(use)
+    best = laws[chosen]
+    errors = {"output error": benchmark_errors_on(record, idx, best.q, best.v, best.a, best.F),
+              "IDIM-LS": benchmark_errors_on(record, idx, bq, bv, ba, bF)}
+    split = None
+    if settings.split > 0:
+        t1 = time.perf_counter()
+        split = _split(settings, record, use, chosen, plant_of, floors, prm, progress)
+        timings["split_validation"] = time.perf_counter() - t1
+    timings["total"] = time.perf_counter() - t0
+    return PlantFit(settings, record, extras, str(cfg.axis),
+                    check, delay, baseline, laws, chosen, choice, errors,
+                    {"F": bF, "q": bq, "v": bv, "a": ba}, split, use, timings, kernel)
+
+
+def _run_inverse(settings: PlantSettings, cfg: Any, record: PlantRecord, extras: dict,
+                 why: str, t0: float) -> PlantFit:
+    """The inverse model alone (``plant.inverse``): every law by IDIM-LS with the two-part
+    verdict, the time split scored by the force prediction error."""
+    from ema_cli.identify.plant.inverse import inverse_fit, prediction_pct
+
+    if settings.free:
+        raise EmaError(f"free: {', '.join(settings.free)} need the closed loop ({why}); "
+                       "expected a reference channel and a discrete controller in the "
+                       "description")
+    rotary = cfg.axis == "rotary"
+    use = _mask(record, settings.window, BENCHMARK.first_sample)
+    sub = _sliced(record, use)
+    kin = filtered_kinematics(record.q_m, record.h_s, BENCHMARK)
+    laws: dict[str, LawFit] = {}
+    order = ["symmetric", "per-direction"] if settings.law == "auto" else [settings.law]
+    for law in order:
+        terms = LAW_TERMS[law]
+        est, fit, unc, ad, g, block, F_sub = inverse_fit(sub, terms, law, rotary)
+        a0 = int(np.flatnonzero(use)[0]) - BENCHMARK.first_sample
+        a0 = max(a0, 0)
+        F = np.full(record.n, np.nan)
+        F[a0:a0 + sub.n] = F_sub
+        laws[law] = LawFit(law, est, fit, unc, ad, g, block, F, record.q_m, kin.dq_m_s,
+                           kin.ddq_m_s2, np.zeros(len(terms), dtype=bool))
+    chosen, choice = _choose(settings.law, laws)
+    nan = float("nan")
+    errors = {f"IDIM-LS ({lw})": BenchmarkErrors(nan, nan, nan, lf.start.relative_error_pct)
+              for lw, lf in laws.items()}
+    split = None
+    if settings.split > 0:
+        idx = np.flatnonzero(use)
+        cut = idx[int(settings.split * idx.size)]
+        first = use & (np.arange(record.n) < cut)
+        held = use & (np.arange(record.n) >= cut)
+        est = idim_ls(_sliced(record, first), LAW_TERMS[chosen])
+        split = {"share": settings.split, "t_split_s": float(record.t_s[cut]),
+                 "estimate": dict(zip(est.names, map(float, est.theta), strict=True)),
+                 "errors": {f"IDIM-LS ({chosen}), force prediction": BenchmarkErrors(
+                     nan, nan, nan, prediction_pct(_sliced(record, held), LAW_TERMS[chosen],
+                                                   est.theta))},
+                 "held_out_samples": int(np.count_nonzero(held))}
+    baseline = laws["symmetric"].start if "symmetric" in laws else laws[chosen].start
+    return PlantFit(settings, record, extras, str(cfg.axis), None, 0, baseline, laws, chosen,
+                    choice, errors, {"F": laws[chosen].F, "q": record.q_m, "v": kin.dq_m_s,
+                                     "a": kin.ddq_m_s2},
+                    split, use, {"total": time.perf_counter() - t0},
+                    {"calls": 0, "lanes": 0, "kernel_s": 0.0, "load_s": 0.0},
+                    f"inverse model only ({why}: no closed loop to simulate)")
+
+
+def _on_bound(fit: oe.OutputErrorFit, free: Mapping[str, tuple[float, float]]) -> np.ndarray:
+    """Which parameters ended within 0.1 % of the span of a bound (freed kernel parameters)."""
+    out = np.zeros(len(fit.names), dtype=bool)
+    for j, n in enumerate(fit.names):
+        if n in free:
+            lo, hi = free[n]
+            out[j] = min(fit.x[j] - lo, hi - fit.x[j]) <= 1e-3 * (hi - lo)
+    return out
+
+
+def _choose(law: str, laws: dict[str, LawFit]) -> tuple[str, str]:
+    """The law reported and why."""
+    if law != "auto":
+        return law, "asked for"
+    if len(laws) == 1:
+        return next(iter(laws)), "the description's LuGre law is symmetric"
+    sym = laws["symmetric"]
+    missed = [o for o in sym.adequacy.omitted if o.missed and o.name == "Fv asymmetry"]
+    if missed:
+        o = missed[0]
+        return "per-direction", (f"the symmetric law misses the viscous asymmetry (t = "
+                                 f"{o.t:.3g}; it lowers the force residual by "
+                                 f"{100 * o.gain:.3g} %)")
+    return "symmetric", "the per-direction terms are not called for (the symmetric law's " \
+        "residual shows no significant viscous asymmetry)"
+
+
+def _split(settings: PlantSettings, record: PlantRecord, use: np.ndarray, law: str,
+           plant_of: Callable, floors: tuple[float, float], prm: dict,
+           progress: Callable | None) -> dict[str, Any]:
+    """Fit the first ``split`` of the used samples, score on the rest (the fit never sees
+    them); IDIM-LS of the same first part scored alike."""
+    idx = np.flatnonzero(use)
+    cut = idx[int(settings.split * idx.size)]
+    fit_use = use & (np.arange(record.n) < cut)
+    held = use & (np.arange(record.n) >= cut)
+    start, fit, plant = _fit_law(law, record, fit_use, plant_of, floors, settings.max_iter,
+                                 progress, settings.free, prm)
+    F, q, v, a = _kinematics(plant, fit.x, prm)
+    base = idim_ls(_sliced(record, fit_use), LAW_TERMS["symmetric"])
+    bF, bq, bv, ba = _kinematics(plant_of(LAW_TERMS["symmetric"]), base.theta, prm)
+    hidx = np.flatnonzero(held)
+    return {"share": settings.split, "t_split_s": float(record.t_s[cut]),
+            "estimate": dict(zip(fit.names, map(float, fit.x), strict=True)),
+            "errors": {"output error": benchmark_errors_on(record, hidx, q, v, a, F),
+                       "IDIM-LS": benchmark_errors_on(record, hidx, bq, bv, ba, bF)},
+            "held_out_samples": int(hidx.size)}
+
+
+@dataclass
+class PlantValidation:
+    """A fitted model simulated against another record: the benchmark's errors and the RMS
+    position error [m] of the fit and of the IDIM-LS baseline, the controller check, the
+    simulated channels."""
+
+    record: PlantRecord
+    controller: ControllerCheck | None
+    errors: dict[str, BenchmarkErrors]
+    rms_position_m: dict[str, float]
+    sims: dict[str, dict[str, np.ndarray]]
+
+
+def validate(fit: PlantFit, data: str | Path, columns: Mapping[str, str] | None = None
+             ) -> PlantValidation:
+    """Simulate the fitted model and the IDIM-LS baseline against another record (the same
+    description, delay and column map unless ``columns``)."""
+    models = {"output error": fit.best.estimate,
+              "IDIM-LS": dict(zip(fit.baseline.names, map(float, fit.baseline.theta),
+                                  strict=True))}
+    if fit.controller is None:
+        models = {f"IDIM-LS ({fit.chosen})": fit.best.estimate}
+    return validate_models(fit.settings, fit.delay, models, data, columns,
+                           inverse=fit.controller is None)
+
+
+def validate_models(settings: PlantSettings, delay: int, models: Mapping[str, Mapping[str, float]],
+                    data: str | Path, columns: Mapping[str, str] | None = None,
+                    inverse: bool = False) -> PlantValidation:
+    """Simulate each model (name -> term -> value, SI) in the described closed loop against the
+    record ``data`` -> the benchmark's errors and the RMS position error of each; ``inverse``:
+    the inverse model's force prediction error only (no closed loop)."""
+    cfg, base, resolve, prm = _description(settings)
+    umax = prm.get("dc_umax", np.inf)
+    record, extras = read_plant_record(data, dict(columns if columns is not None
+                                                  else settings.columns),
+                                       gain=prm.get("amp_gain"),
+                                       saturation=umax if np.isfinite(umax) else None,
+                                       limit_force=(umax * prm.get("amp_gain", 1.0)
+                                                    if np.isfinite(umax) else None),
+                                       need_reference=not inverse)
+    if inverse:
+        from ema_cli.identify.plant.inverse import prediction_pct
+
+        nan = float("nan")
+        errs = {k: BenchmarkErrors(nan, nan, nan, prediction_pct(
+            record, tuple(m), np.array(list(m.values())))) for k, m in models.items()}
+        return PlantValidation(record, None, errs, dict.fromkeys(models, nan), {})
+    if record.reference_m is None:
+        raise EmaError(f"{record.source}: no reference channel; expected the closed loop's "
+                       "reference position (--columns reference=NAME[:UNIT])")
+    if abs(record.h_s / prm["Ts"] - 1.0) > SAMPLE_TOL:
+        raise EmaError(f"{record.source}: samples every {record.h_s:.6g} s but the described "
+                       f"controller samples every {prm['Ts']:.6g} s")
+    first = BENCHMARK.first_sample
+    check = check_controller(prm, record.q_m, record.reference_m, extras["actuation"],
+                             extras["unit"], extras.get("disturbance"), first=first)
+    chosen_delay(check, delay, record.source)
+    idx = np.arange(first, record.n)
+    out, rms, sims = {}, {}, {}
+    for name, est in models.items():
+        terms = tuple(est)
+        plant = _plant(settings, base, resolve, prm, record, extras, delay, terms)
+        F, q, v, a = _kinematics(plant, np.array([est[t] for t in terms]), prm)
+        out[name] = benchmark_errors_on(record, idx, q, v, a, F)
+        rms[name] = float(np.sqrt(np.mean((q[idx] - record.q_m[idx]) ** 2)))
+        sims[name] = {"F": F, "q": q, "v": v, "a": a}
+    return PlantValidation(record, check, out, rms, sims)

@@ -1,0 +1,98 @@
+"""The inverse model alone: a record with no closed loop to simulate (no reference channel, or a
+description without a discrete controller: a robot's joint, an axis driven by hand or by an
+unknown controller) is identified by IDIM-LS, with the same two-part verdict as the output
+error: intervals from the CR3 cluster-robust covariance over contiguous blocks of the
+regression's rows (the rows' residual is coloured too), and the adequacy tests on the force
+residual (fit, whiteness, omitted terms — for a rotary axis also a gravity-like ``cos q``,
+``sin q`` — and where it fails). Its scores are the inverse model's force prediction errors
+(the benchmark's relative error ``100 ||y - W theta||/||y||``), on the fitted rows, on the
+held-out part of a time split and on another record.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ema_cli.identify.plant import adequacy as adq
+from ema_cli.identify.plant import output_error as oe
+from ema_cli.identify.plant.idim import (
+    BENCHMARK,
+    IdimEstimate,
+    build_regression,
+    filtered_kinematics,
+    idim_ls,
+)
+from ema_cli.identify.plant.records import PlantRecord
+from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
+
+BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
+BLOCK_MIN_S = 0.25  # ... and at least this long [s]
+MIN_CLUSTERS = 20  # independent residual blocks a verdict needs [-]
+
+
+def _rows(record: PlantRecord, est: IdimEstimate) -> tuple[np.ndarray, np.ndarray]:
+    """The decimated velocity and position at the regression's rows."""
+    from ema_cli.identify.plant import matlab
+
+    s = est.regression.settings
+    kin = filtered_kinematics(record.q_m, record.h_s, s)
+    a, b = s.first_sample, record.n - s.drop_end
+    r = s.decimation
+    return matlab.decimate(kin.dq_m_s[a:b], r), matlab.decimate(kin.q_m[a:b], r)
+
+
+def row_clusters(n_rows: int, h_row: float, block_s: float) -> list[np.ndarray]:
+    """Contiguous blocks of ``block_s`` seconds of the regression's rows."""
+    per = max(int(round(block_s / h_row)), 1)
+    out: list[np.ndarray] = []
+    for a in range(0, n_rows, per):
+        b = min(a + per, n_rows)
+        if b - a < per // 2 and out:
+            out[-1] = np.concatenate([out[-1], np.arange(a, b)])
+        else:
+            out.append(np.arange(a, b))
+    return out
+
+
+def inverse_fit(record: PlantRecord, terms: tuple[str, ...], law: str, rotary: bool
+                ) -> tuple[IdimEstimate, oe.OutputErrorFit, Uncertainty, adq.Adequacy, int,
+                           float, np.ndarray]:
+    """IDIM-LS of ``terms`` on ``record`` with the house's verdict -> (estimate, the fit as an
+    :class:`OutputErrorFit` (r = residual, J = -W), CR3 uncertainty, adequacy, clusters, block
+    length [s], the predicted force at the record's samples [N], NaN where no row is)."""
+    est = idim_ls(record, terms)
+    reg = est.regression
+    e = est.residual_n
+    h_row = reg.settings.decimation * record.h_s
+    tc = oe.correlation_time(e, h_row)
+    block = max(BLOCK_CORR * tc, BLOCK_MIN_S)
+    block = min(block, max(e.size * h_row / MIN_CLUSTERS, h_row))
+    clusters = row_clusters(e.size, h_row, block)
+    J = -reg.W
+    cov, cond, dof = covariance_clustered(J, e, clusters)
+    unc = assess(est.names, est.theta, cov, dof, cond)
+    v_rows, q_rows = _rows(record, est)
+    y_hat = reg.W @ est.theta
+    tests = [adq.correlation_test("force residual: autocorrelation", e),
+             adq.correlation_test("force residual x velocity", e, v_rows)]
+    a = adq.Adequacy(
+        fit_pct={"force": adq.fit_percent(reg.y, y_hat)}, tests=tests,
+        omitted=adq.omitted_terms(e, v_rows, terms, clusters, "rad/s" if rotary else "m/s",
+                                  q_rows if rotary else None),
+        ranges={"force": adq.failing_ranges(reg.t_s, e, block)},
+        motion=adq.by_motion(e, v_rows), correlation_time_s={"force": tc})
+    adq.judge(a, len(clusters), MIN_CLUSTERS)
+    fit = oe.OutputErrorFit(est.names, est.theta.copy(), e, J, (est.sigma_n, float("nan")), [],
+                            0, True, "linear least squares on the decimated rows (IDIM-LS)")
+    F = np.full(record.n, np.nan)
+    s = reg.settings
+    F[s.first_sample:record.n - s.drop_end] = reg.W_raw @ est.theta
+    return est, fit, unc, a, len(clusters), block, F
+
+
+def prediction_pct(record: PlantRecord, terms: tuple[str, ...], theta: np.ndarray) -> float:
+    """The inverse model's force prediction error on a record [%] (the benchmark's
+    cross-test validation, ``Script_IDIM_LS_CTV.m``)."""
+    reg = build_regression(record, terms, BENCHMARK)
+    y_hat = reg.W @ theta
+    return float(100.0 * np.linalg.norm(reg.y - y_hat) / np.linalg.norm(reg.y))
