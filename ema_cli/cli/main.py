@@ -109,7 +109,7 @@ SHORT_HELP = {
     "yield": "Production yield over toleranced units, with its interval.",
     "tune": "Tune the controller's free variables to the scenarios.",
     "sensitivity": "Global sensitivity of metrics to factors (Sobol, Morris).",
-    "identify": "Identify the actuator from a log (torque or closed loop).",
+    "identify": "Identify the actuator from torque data, a log or a record.",
     "design": "From a log to a controller signed off against a spec.",
     "reproduce": "Reproduce the paper: studies, thresholds, claims.",
     "locations": "The nine nonlinearity locations of the paper.",
