@@ -80,15 +80,13 @@ def timing() -> dict[str, Any]:
 
 def finished_line() -> str | None:
     """``took 3 min 12 s (estimated ~3 min)`` at the end of a command that announced an
-    estimate or ran longer than :data:`ESTIMATE_MIN_S`; None otherwise."""
+    estimate; None otherwise (whether a line is printed depends on the size of the work, never
+    on how loaded the machine is)."""
     t = timing()
-    if t["elapsed_s"] is None:
+    if t["elapsed_s"] is None or not _timing.get("announced"):
         return None
     est = t["estimated_s"]
-    if not _timing.get("announced") and t["elapsed_s"] <= ESTIMATE_MIN_S:
-        return None
-    said = f" (estimated {duration(est)})" if _timing.get("announced") and est else ""
-    return f"took {elapsed(t['elapsed_s'])}{said}"
+    return f"took {elapsed(t['elapsed_s'])} (estimated {duration(est or 0.0)})"
 
 
 def estimate(n_sims: int, n_steps: int, workers: int) -> str:
