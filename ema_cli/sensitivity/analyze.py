@@ -263,7 +263,8 @@ def imprecise(table: pd.DataFrame, method: str) -> list[str]:
     [0, 1] (a total index is a share of the variance) -> short reasons, most influential first."""
     key = "ST" if method == "sobol" else "mu_star"
     out = []
-    for _, row in ranking(table, method).iterrows():
+    ordered = table.sort_values(key, ascending=False, kind="stable")  # ranked or not
+    for _, row in ordered.iterrows():
         value, conf = float(row[key]), float(row.get(f"{key}_conf", math.nan))
         if method == "sobol" and math.isfinite(value) and not 0.0 <= value <= 1.0:
             out.append(f"{row['factor']} ST = {value:.3g} (outside [0, 1])")
