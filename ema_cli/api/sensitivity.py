@@ -54,6 +54,22 @@ class Sensitivity:
         """convergence.csv: the indices on nested prefixes of the design (column ``n``)."""
         return self.result.convergence
 
+    def ranking_text(self, input: str | None = None, metric: str | None = None,
+                     top: int = 3) -> str:
+        """The ``top`` factors of one input and metric with their index and its 95 %
+        half-width, as the console prints them (``Kpp 0.41 ± 0.12, ...``)."""
+        from ema_cli.sensitivity.analyze import index_text
+
+        t = self.ranked(input, metric)
+        return ", ".join(index_text(row, self.result.method) for _, row in t.head(top).iterrows())
+
+    def imprecise(self, input: str | None = None, metric: str | None = None) -> list[str]:
+        """The factors of one input and metric whose index is too imprecise to rank (its
+        half-width over a fifth of it, or ST outside [0, 1]): ``sensitivity.analyze.imprecise``."""
+        from ema_cli.sensitivity.analyze import imprecise
+
+        return imprecise(self.ranked(input, metric), self.result.method)
+
     def ranked(self, input: str | None = None, metric: str | None = None) -> pd.DataFrame:
         """The indices of one input and metric (default: the first of each), most influential
         factor first (by ST, or mu* for Morris)."""

@@ -65,17 +65,13 @@ def sensitivity_cmd(
                       scheduler=scheduler, progress=progress, out=out, write=True,
                       log=lambda text: err_console.print(text))
     res = run.result
-    from ema_cli.sensitivity.analyze import imprecise, index_text
-
     key = "ST" if res.method == "sobol" else "mu_star"
     for r in res.inputs:
         for metric in res.cfg.metrics:
-            t = run.ranked(r.name, metric)
-            top = ", ".join(index_text(row, res.method) for _, row in
-                            t.head(TOP_FACTORS).iterrows())
+            top = run.ranking_text(r.name, metric, TOP_FACTORS)
             console.print(f"{r.name} {metric} ({key} ± 95 % CI, no unit): {top}",
                           highlight=False)
-            weak = imprecise(t, res.method)
+            weak = run.imprecise(r.name, metric)
             if weak:
                 more = f" and {len(weak) - 3} more" if len(weak) > 3 else ""
                 err_console.print(f"[yellow]warning:[/] n = {res.n} is too small to rank "
