@@ -58,7 +58,7 @@ test: $(TSTAMP)  ## lint, undeclared imports (deptry), the fast tier of the test
 test-all: test  ## make test, then the slow tier (cold compiles, long end-to-end checks)
 	$(BIN)/python -m pytest -n auto -m slow
 
-bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, yield, the identification battery (hours)
+bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep, sensitivity, tuning, yield (and on processes and Dask), the identification battery (hours)
 	$(BIN)/python experiments/bench_compile.py
 	$(BIN)/python experiments/bench_tests.py
 	$(BIN)/python experiments/bench.py
@@ -70,6 +70,7 @@ bench: $(TSTAMP)  ## benchmarks: kernel, compile and start-up, make test, sweep,
 	$(BIN)/python experiments/bench_acceptance.py
 	rm -rf results/bench/yield-1000
 	$(BIN)/python experiments/bench_yield.py --out results/bench/yield-1000
+	$(BIN)/python experiments/bench_scale.py
 	$(BIN)/python experiments/bench_identify_logs.py
 	$(BIN)/python -m experiments.loggen.battery --out results/battery/logs --n 20 --seed 2026 --jobs 2
 	$(BIN)/python experiments/identify_battery.py --battery results/battery/logs --out results/battery/fits

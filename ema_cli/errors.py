@@ -15,6 +15,10 @@ class EmaError(Exception):
     def __str__(self) -> str:
         return self.message
 
+    def __reduce__(self) -> tuple[type, tuple[str, int]]:
+        """Pickled with its exit code (raised in a worker process, re-raised here)."""
+        return (type(self), (self.message, self.exit_code))
+
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the program runs: it stops as Ctrl-C does (finished work kept,

@@ -167,3 +167,25 @@ def capped_jobs(n_jobs: int | None, cfg: Any, backend: str | None) -> int | None
     if note:
         warnings.warn(note, stacklevel=3)
     return out
+
+
+def backend_args(backend: Any, n_jobs: Any, scheduler: Any) -> int | None:
+    """The execution arguments of ``yield``, ``tune``, ``design`` and the closed-loop fit
+    (``sweep.executor``): ``backend`` one of ``limits.BACKENDS`` or None (in this process, as
+    before), ``n_jobs`` -1/None or 1 .. ``MAX_WORKERS`` (capped at the cores with a warning,
+    unless a dask cluster runs them), ``scheduler`` the dask scheduler (only with ``backend``
+    dask; dask.distributed installed); EmaError naming the argument -> ``n_jobs`` to use."""
+    from ema_cli.limits import BACKENDS, MAX_WORKERS
+
+    choice_arg(backend, "backend", BACKENDS)
+    if n_jobs is not None and n_jobs != -1:
+        number_arg(n_jobs, "n_jobs", low=1, high=MAX_WORKERS, integer=True)
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise EmaError(f"scheduler must be an address (str), got {scheduler!r}")
+    if scheduler is not None and backend != "dask":
+        raise EmaError("scheduler is for backend dask; give backend dask with it")
+    if backend == "dask":
+        from ema_cli.sweep.executor import check_dask
+
+        check_dask(scheduler)
+    return capped_jobs(n_jobs, None, backend)

@@ -103,6 +103,8 @@ class DesignResult:
     inputs: Any = None
     """What the folder's marker records (``report.run_inputs.RunInputs``;
     :func:`design_inputs`)."""
+    execution: dict[str, Any] = field(default_factory=dict)
+    """Where the work ran (``sweep.executor.Executor.describe``)."""
 
     @property
     def verdict(self) -> str:
@@ -160,6 +162,7 @@ class DesignResult:
             "notes": self.notes,
             "overrides": [[k, v] for k, v in self.overrides],
             "timings_s": self.timings,
+            "execution": self.execution,
         }
 
     def save(self, folder: str | Path | None = None) -> Path:
@@ -336,14 +339,33 @@ def spec_document(spec_doc: dict[str, Any], plant: dict[str, Any], gains: dict[s
 def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = None, *,
            tune_config: str | Path | None = None, spec: str | Path | None = None,
            budget: int | None = None, stage: Callable[[str], None] | None = None,
-           tune_log: Callable[[str], None] | None = None) -> DesignResult:
+           tune_log: Callable[[str], None] | None = None, backend: str | None = None,
+           n_jobs: int | None = None, scheduler: str | None = None) -> DesignResult:
     """Identify the actuator from ``log``, tune its controller, sign it off (module docstring).
 
     ``config``: a design config (``config.design.DesignConfig``: ``identify:`` settings,
     ``tune:`` overrides); ``overrides``: ``identify.KEY`` / ``tune.KEY`` dotted paths;
     ``tune_config`` (default configs/tune.yaml) and ``spec`` (default configs/acceptance.yaml);
     ``budget``: the tuning's candidate evaluations per run; ``stage(text)`` is called at the
-    start of each step. Bad inputs raise EmaError before the identification starts."""
+    start of each step. ``backend`` (threads, loky, dask; None: this process's threads),
+    ``n_jobs`` and ``scheduler`` say where the identification's starts, the tuning's
+    candidates and the acceptance cases run (``sweep.executor``; the same bits on every
+    backend). Bad inputs raise EmaError before the identification starts."""
+    from ema_cli.api._inputs import backend_args
+    from ema_cli.sweep.executor import executing
+
+    n_jobs = backend_args(backend, n_jobs, scheduler)
+    with executing(backend, n_jobs, scheduler) as ex:
+        res = _design(log, config, overrides, tune_config, spec, budget, stage, tune_log)
+        res.execution = ex.describe()
+    return res
+
+
+def _design(log: str | Path, config: ConfigSource, overrides: Overrides,
+            tune_config: str | Path | None, spec: str | Path | None, budget: int | None,
+            stage: Callable[[str], None] | None, tune_log: Callable[[str], None] | None
+            ) -> DesignResult:
+    """:func:`design` on the current executor."""
     from ema_cli.api.acceptance import acceptance
     from ema_cli.api.identify_logs import identify_closed_loop
     from ema_cli.api.tune import tune
@@ -433,14 +455,23 @@ def design(log: str | Path, config: ConfigSource = None, overrides: Overrides = 
                          + ", ".join(clipped))
     else:
         notes.append("interval corners not run: an interval is not finite")
-    cases = []
+    from ema_cli.sweep.executor import Task, current
+
     t0 = time.perf_counter()
-    for k, (case, vals, sides) in enumerate(cases_in):
-        say(f"3/3 acceptance {k + 1}/{len(cases_in)}: {case}")
-        sdoc, snotes = spec_document(spec_doc, {**plant, **vals}, gains)
-        if k == 0:
-            notes += snotes
-        res = acceptance(sdoc)
+    docs = [spec_document(spec_doc, {**plant, **vals}, gains) for _, vals, _ in cases_in]
+    notes += docs[0][1]
+    ex = current()
+
+    def tasks() -> Any:  # each case a task: on the workers of a remote backend
+        for k, ((case, _, _), (sdoc, _)) in enumerate(zip(cases_in, docs, strict=True)):
+            if not ex.remote:  # run here, now
+                say(f"3/3 acceptance {k + 1}/{len(cases_in)}: {case}")
+            yield Task(acceptance, (sdoc,), f"acceptance case {case}")
+
+    cases = []
+    for (k, res), (case, vals, sides) in zip(ex.map(tasks()), cases_in, strict=True):
+        if ex.remote:
+            say(f"3/3 acceptance {k + 1}/{len(cases_in)} done: {case}")
         cases.append(DesignCase(case, vals, sides, res))
     timings["acceptance"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all

@@ -4,7 +4,7 @@ them."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -79,9 +79,11 @@ def make_data_inputs(config: ConfigSource = None, overrides: Overrides = None,
 
 @dataclass
 class ClosedLoopIdentification:
-    """A closed-loop identification: ``result`` is ``identify.closed_loop.ga_fit.ClosedLoopFit``."""
+    """A closed-loop identification: ``result`` is ``identify.closed_loop.ga_fit.ClosedLoopFit``;
+    ``execution`` where its starts ran (``sweep.executor.Executor.describe``)."""
 
     result: ClosedLoopFit
+    execution: dict[str, Any] = field(default_factory=dict)
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -119,7 +121,8 @@ class ClosedLoopIdentification:
 
         s = self.result.settings
         return _save("identify", s.name, s, folder,
-                     lambda out: write_closed_loop(self.result, out))
+                     lambda out: write_closed_loop(self.result, out,
+                                                   execution=self.execution))
 
 
 @dataclass
@@ -201,11 +204,18 @@ class SyntheticData:
                      lambda out: write_synthetic(self.log, out, js))
 
 
-def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = None,
+def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = None, *,
+                         backend: str | None = None, n_jobs: int | None = None,
+                         scheduler: str | None = None,
                          **settings: Any) -> ClosedLoopIdentification:
     """Fit the simulator to a closed-loop log (``data=`` the file: CSV, Parquet or MATLAB .mat;
     ``columns=`` a column map, ``window=`` (T0, T1) [s]), as ``ema identify --closed-loop``
-    does; settings: ``identify.log_settings.ClosedLoopSettings``."""
+    does; settings: ``identify.log_settings.ClosedLoopSettings``. ``backend`` (threads, loky,
+    dask; None: this process's threads), ``n_jobs`` and ``scheduler`` say where the
+    multiple-shooting starts run (``sweep.executor``; the same bits on every backend)."""
+    from ema_cli.api._inputs import backend_args
+
+    n_jobs = backend_args(backend, n_jobs, scheduler)
     from ema_cli.config.loader import load_config
     from ema_cli.identify.closed_loop.ga_fit import run_closed_loop
     from ema_cli.identify.closed_loop.problem import load_log
@@ -224,8 +234,11 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
             raise EmaError(f"data: out of memory reading the log '{cfg.data}' ({size:,} "
                            "bytes); read a part of it with window (T0, T1) [s]") from None
         check_log_steps(cfg, log.duration, str(cfg.data))
+    from ema_cli.sweep.executor import executing
+
     try:
-        return ClosedLoopIdentification(run_closed_loop(cfg, log))
+        with executing(backend, n_jobs, scheduler) as ex:
+            return ClosedLoopIdentification(run_closed_loop(cfg, log), ex.describe())
     except MemoryError:
         what = (f"the {log.n:,}-row, {log.duration:.4g} s log '{cfg.data}'" if log is not None
                 else "the log")

@@ -22,8 +22,9 @@ if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
 
-    from ema_cli.identify.plant.fit import PlantFit, PlantValidation
+    from ema_cli.identify.plant.fit import PlantFit
     from ema_cli.identify.plant.settings import PlantSettings
+    from ema_cli.identify.plant.validation import PlantValidation
 
 
 def plant_settings(config: ConfigSource = None, overrides: Overrides = None,
@@ -166,7 +167,7 @@ class PlantIdentification:
     def validate(self, data: str | Path, columns: dict[str, str] | None = None
                  ) -> PlantValidationResult:
         """Simulate the fitted model and IDIM-LS against another record."""
-        from ema_cli.identify.plant.fit import validate
+        from ema_cli.identify.plant.validation import validate
         from ema_cli.report.plant_report import axis_of
 
         v = validate(self.result, data, columns)
@@ -189,7 +190,8 @@ def identify_plant(data: str | Path | None = None, actuator: str | Path | None =
     """Identify a rigid axis from a closed-loop record (``ema identify plant DATA --actuator
     DESC``); ``settings``: law, delay, window, split, columns, set, max_iter, validate_data.
     ``progress(stage, done, total)`` is called as the fit advances."""
-    from ema_cli.identify.plant.fit import run_plant, validate
+    from ema_cli.identify.plant.fit import run_plant
+    from ema_cli.identify.plant.validation import validate
 
     s = plant_settings(config, overrides, data=None if data is None else str(data),
                        actuator=None if actuator is None else str(actuator), **settings)
@@ -205,8 +207,8 @@ def validate_folder(folder: str | Path, data: str | Path,
     import json
 
     from ema_cli.errors import EmaError
-    from ema_cli.identify.plant.fit import validate_models
     from ema_cli.identify.plant.settings import PlantSettings
+    from ema_cli.identify.plant.validation import validate_models
 
     js = Path(folder) / "plant.json"
     if not js.is_file():

@@ -46,6 +46,8 @@ class YieldResult:
     resumed_units: int = 0
     inputs: Any = None
     """What the folder's marker records (``report.run_inputs.RunInputs``)."""
+    execution: dict[str, Any] = field(default_factory=dict)
+    """Where the units ran (``sweep.executor.Executor.describe``: backend, workers, retries)."""
 
     @property
     def overall(self) -> Rate:
@@ -202,7 +204,9 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
                      k: float | None = None, block: int = DEFAULT_BLOCK,
                      worst_budget: int | None = WORST_BUDGET, drivers: bool = True,
                      out: str | Path | None = None, checkpoint: bool = False,
-                     progress: Callable[[dict[str, Any]], None] | None = None) -> YieldResult:
+                     progress: Callable[[dict[str, Any]], None] | None = None,
+                     backend: str | None = None, n_jobs: int | None = None,
+                     scheduler: str | None = None) -> YieldResult:
     """The yield of the battery ``spec`` over units drawn from ``tolerances`` (a YAML file or a
     dict: ``production.tolerances``), ``overrides`` being dotted paths of the spec.
 
@@ -213,10 +217,15 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
     3); ``worst_budget``: units differential evolution evaluates per test (None: no worst-case
     search). ``checkpoint``: each finished block is written into the output folder (``out``,
     or a new one under results/yield/) and an interrupted run of the same inputs resumes from
-    it. ``progress(state)`` is called after each block with the counts and the interval."""
-    from ema_cli.api._inputs import callable_arg
+    it. ``progress(state)`` is called after each block with the counts and the interval.
+    ``backend`` (threads, loky, dask; None: this process's threads), ``n_jobs`` (workers) and
+    ``scheduler`` (dask) say where the units and the worst-case searches run
+    (``sweep.executor``): the results are the same bits on every backend, and a run
+    checkpointed on one resumes on any other."""
+    from ema_cli.api._inputs import backend_args, callable_arg
 
     callable_arg(progress, "progress")
+    n_jobs = backend_args(backend, n_jobs, scheduler)
     for name, v, lo in (("n", n, 1), ("block", block, 1)):
         if isinstance(v, bool) or not isinstance(v, int) or v < lo:
             raise EmaError(f"{name} must be an integer >= {lo}, got {v!r}")
@@ -242,6 +251,22 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
                                  "target_halfwidth": target_halfwidth, "k": plan.tolerances.k,
                                  "block": block, "worst_budget": worst_budget,
                                  "drivers": drivers})
+    from ema_cli.sweep.executor import executing
+
+    with executing(backend, n_jobs, scheduler) as ex:  # a cluster out of reach: before any
+        res = _checkpointed(plan, settings, inputs, out, checkpoint, n, level,  # folder
+                            target_halfwidth, block, worst_budget, drivers, progress)
+        res.execution = ex.describe()
+    res.inputs = inputs
+    return res
+
+
+def _checkpointed(plan: YieldPlan, settings: dict[str, Any], inputs: Any, out: Any,
+                  checkpoint: bool, n: int, level: float, target_halfwidth: float | None,
+                  block: int, worst_budget: int | None, drivers: bool, progress: Any
+                  ) -> YieldResult:
+    """The run, checkpointed in its folder (``checkpoint``: an unfinished run of the same
+    inputs there resumes from its finished blocks)."""
     folder, done = None, None
     if checkpoint:
         from ema_cli.report.rundir import FINISHED, NEW, prepare_output
@@ -259,10 +284,8 @@ def production_yield(spec: ConfigSource, tolerances: ConfigSource, overrides: Ov
             plan.rows = rows
         if state != FINISHED:
             write_plan(folder, plan, settings)
-    res = _run(plan, settings, folder, done, n, level, target_halfwidth, block, worst_budget,
-               drivers, progress)
-    res.inputs = inputs
-    return res
+    return _run(plan, settings, folder, done, n, level, target_halfwidth, block, worst_budget,
+                drivers, progress)
 
 
 def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
@@ -270,14 +293,13 @@ def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
          worst_budget: int | None, drivers: bool, progress: Any) -> YieldResult:
     import pandas as pd
 
-    from ema_cli.production.run import rate, run_block
+    from ema_cli.production.run import rate, unit_blocks
     from ema_cli.progress import report
-    from ema_cli.sim.runner import TALLY
 
-    tally0 = dict(TALLY)
     t0 = time.perf_counter()
     frames = [] if done is None else [done]
     have = 0 if done is None else len(done)
+
     def estimate(r: Rate, elapsed: float | None) -> dict[str, Any]:
         lo, hi = r.interval
         return {"n": r.n, "n_pass": r.n_pass, "n_fail": r.n_fail,
@@ -289,42 +311,45 @@ def _run(plan: YieldPlan, settings: dict[str, Any], folder: Path | None,
     history = [estimate(rate(done["result"].iloc[:m], level), None)
                for m in range(block, have, block)] if done is not None else []
     walls: dict[str, float] = {}
+    kernel_s, lane_steps = 0.0, 0
     stop = f"n = {n} units sampled"
-    while True:
-        current = pd.concat(frames, ignore_index=True) if frames else None
-        if current is not None and len(current):
-            r = rate(current["result"], level)
-            state = estimate(r, time.perf_counter() - t0)
-            if not history or history[-1]["n"] != r.n:
-                history.append(state)
-                if progress is not None:
-                    progress(state)
-            if target is not None and r.halfwidth <= target:
-                stop = (f"the interval's half width {r.halfwidth:.4f} reached the target "
-                        f"{target:g} at n = {r.n}")
+    blocks = unit_blocks(plan, have, n, block)
+    try:
+        while True:
+            current = pd.concat(frames, ignore_index=True) if frames else None
+            if current is not None and len(current):
+                r = rate(current["result"], level)
+                state = estimate(r, time.perf_counter() - t0)
+                if not history or history[-1]["n"] != r.n:
+                    history.append(state)
+                    if progress is not None:
+                        progress(state)
+                if target is not None and r.halfwidth <= target:
+                    stop = (f"the interval's half width {r.halfwidth:.4f} reached the target "
+                            f"{target:g} at n = {r.n}")
+                    break
+            if have >= n:
+                if target is not None:
+                    stop = (f"the cap n = {n} was reached before the half width reached "
+                            f"{target:g}")
                 break
-        if have >= n:
-            if target is not None:
-                stop = (f"the cap n = {n} was reached before the half width reached "
-                        f"{target:g}")
-            break
-        size = min(block, n - have)
-        report(f"units {have + 1}-{have + size} of {n}")
-        values = plan.values(have, have + size)
-        df, w = run_block(plan, have, values)
-        for key, v in w.items():
-            walls[key] = walls.get(key, 0.0) + v
-        if folder is not None:
-            from ema_cli.report.yield_report import write_block
+            report(f"units {have + 1}-{min(have + block, n)} of {n}")
+            run = next(blocks)
+            for key, v in run.walls.items():
+                walls[key] = walls.get(key, 0.0) + v
+            kernel_s, lane_steps = kernel_s + run.kernel_s, lane_steps + run.lane_steps
+            if folder is not None:
+                from ema_cli.report.yield_report import write_block
 
-            write_block(folder, have, df, plan.rows)
-        frames.append(df)
-        have += size
+                write_block(folder, have, run.frame, plan.rows)
+            frames.append(run.frame)
+            have += len(run.frame)
+    finally:
+        blocks.close()
     samples = pd.concat(frames, ignore_index=True)
     timings = {"yield_s": time.perf_counter() - t0,
-               # the units' kernel work: its throughput is lane_steps / kernel_s
-               "kernel_s": TALLY["kernel_s"] - tally0["kernel_s"],
-               "kernel_lane_steps": TALLY["lane_steps"] - tally0["lane_steps"],
+               # the units' kernel work, wherever it ran: its throughput is lane_steps / kernel_s
+               "kernel_s": kernel_s, "kernel_lane_steps": lane_steps,
                **{f"test {k}": v for k, v in walls.items()}}
     res = YieldResult(plan, samples, float(level), settings, history, timings, stop,
                       folder=folder, resumed_units=0 if done is None else len(done))

@@ -36,6 +36,8 @@ class TuneResult:
     overrides: list[tuple[str, Any]] = field(default_factory=list)
     inputs: Any = None
     """What the folder's marker records (``report.run_inputs.RunInputs``; :func:`tune_inputs`)."""
+    execution: dict[str, Any] = field(default_factory=dict)
+    """Where the candidates ran (``sweep.executor.Executor.describe``)."""
 
     # ------------------------------------------------------------------ values
     @property
@@ -254,13 +256,16 @@ def tune_inputs(config: ConfigSource, overrides: Overrides = None, *,
 def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
          runs: int | None = None, budget: int | None = None,
          progress: Callable[[int, int, int], None] | None = None,
-         log: Callable[[str], None] | None = None) -> TuneResult:
+         log: Callable[[str], None] | None = None, backend: str | None = None,
+         n_jobs: int | None = None, scheduler: str | None = None) -> TuneResult:
     """Tune the controller of ``config`` (a tuning config: YAML file, dict or
     :class:`~ema_cli.config.tune.TuneConfig`); ``method`` (ga|de), ``runs`` (seeds) and
     ``budget`` (candidate evaluations per run) override the config's optimiser section.
     ``progress(run, done, total)`` is called after each generation; ``log(text)`` once before
     the run with how the budget becomes whole generations (:func:`tune.run.explain_budget`).
-    Raises EmaError when no
+    ``backend`` (threads, loky, dask; None: this process's threads), ``n_jobs`` and
+    ``scheduler`` say where each generation's candidates run (``sweep.executor``; the same
+    bits on every backend). Raises EmaError when no
     candidate meets every constraint (nothing is written then)."""
     from ema_cli.config.loader import load_config
     from ema_cli.config.tune import MAX_BUDGET, MAX_RUNS, TuneConfig
@@ -279,6 +284,9 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
 
     callable_arg(progress, "progress")
     callable_arg(log, "log")
+    from ema_cli.api._inputs import backend_args
+
+    n_jobs = backend_args(backend, n_jobs, scheduler)
     pairs = override_pairs(overrides)
     cfg = load_config(config, pairs, TuneConfig)
     scenarios, actuator_doc = build_scenarios(cfg, base_dir(config))
@@ -311,10 +319,13 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
                           f"{n_sims:,} simulations of {steps:,} steps on {workers} cores "
                           f"({len(scenarios)} scenarios per evaluation; --budget, --runs set "
                           "it)", force=n_sims > BIG_RUN)
-    outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S)
+    from ema_cli.sweep.executor import executing
+
+    with executing(backend, n_jobs, scheduler) as ex:
+        outcome = run_tuning(cfg, scenarios, method, runs, budget, progress, RECORD_DT_S)
     outcome.actuator_document = actuator_doc
     res = TuneResult(cfg, outcome, str(config) if isinstance(config, str | Path) else "dict",
-                     pairs, _inputs(cfg, pairs, method, runs, budget))
+                     pairs, _inputs(cfg, pairs, method, runs, budget), ex.describe())
     if not outcome.feasible:
         raise EmaError(infeasible_message(res))
     return res

@@ -6,7 +6,7 @@ import functools
 import os
 import sys
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
@@ -176,3 +176,49 @@ def check_number(value: float | int | None, option: str, *, low: float | None = 
 def is_interactive() -> bool:
     """True when stdout is a terminal (progress bars are shown only then)."""
     return sys.stdout.isatty()
+
+
+BackendOpt = Annotated[str | None, typer.Option(
+    "--backend", help="Where the work runs: threads (this process, numba's threads; the "
+                      "default) | loky (worker processes) | dask (a cluster: --scheduler). "
+                      "Every backend gives the same results, bit for bit.")]
+NJobsOpt = Annotated[int | None, typer.Option(
+    "--n-jobs", help="Workers: threads or processes (-1: all cores; default all, capped at "
+                     "the cores); the dask backend uses every thread of the cluster.")]
+SchedulerOpt = Annotated[str | None, typer.Option(
+    "--scheduler", help="Dask scheduler address for --backend dask, e.g. "
+                        "tcp://host:8786.")]
+BACKEND_OPTIONS = {"backend": "--backend", "n_jobs": "--n-jobs", "scheduler": "--scheduler"}
+"""The API's execution arguments -> the options naming them (for :func:`as_options`)."""
+
+
+def backend_options(backend: str | None, n_jobs: int | None, scheduler: str | None
+                    ) -> int | None:
+    """``--backend``, ``--n-jobs`` and ``--scheduler`` checked, naming the option ->
+    ``--n-jobs`` to use (capped at the cores with a note, unless a cluster runs the work)."""
+    from ema_cli.limits import BACKENDS
+
+    if backend is not None and backend not in BACKENDS:
+        raise EmaError(f"--backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
+    if scheduler is not None and backend != "dask":
+        raise EmaError("--scheduler is for --backend dask; give --backend dask with it")
+    return check_jobs(n_jobs, "--n-jobs", scheduler if backend == "dask" else None)
+
+
+def print_retries(execution: dict[str, Any] | None) -> None:
+    """One note per block that was run again (a lost worker), on stderr."""
+    for r in (execution or {}).get("retries", []):
+        err_console.print(f"note: {r['block']} run again ({r['why']})", highlight=False)
+
+
+def check_jobs(n_jobs: int | None, option: str, scheduler: str | None = None) -> int | None:
+    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS -> the count to use, capped at the
+    cores available (with a note) unless a cluster ``scheduler`` is given."""
+    from ema_cli.limits import MAX_WORKERS, cap_workers
+
+    if n_jobs is not None and n_jobs != -1:
+        check_number(n_jobs, option + " (-1: all cores)", low=1, high=MAX_WORKERS)
+    n_jobs, note = cap_workers(n_jobs, option, cluster=scheduler is not None)
+    if note:
+        err_console.print(f"note: {note}", highlight=False)
+    return n_jobs

@@ -11,12 +11,18 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import (
+    BACKEND_OPTIONS,
+    BackendOpt,
+    NJobsOpt,
+    SchedulerOpt,
     as_options,
+    backend_options,
     console,
     err_console,
     handle_errors,
     out_help,
     parse_assignments,
+    print_retries,
 )
 from ema_cli.progress import report as report_stage
 
@@ -42,6 +48,9 @@ def design_cmd(
         "--budget", help="Candidate evaluations of the tuning (default: the tuning "
                          "config's optimiser.budget).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
+    backend: BackendOpt = None,
+    n_jobs: NJobsOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """From LOG to a signed-off controller: identify the actuator (closed-loop fit), tune the
     controller on the fitted actuator (the tuning config's scenarios), run the acceptance spec
@@ -58,6 +67,7 @@ def design_cmd(
         raise EmaError(f"config '{config}' is not a file (a design config, e.g. "
                        "configs/design.yaml)")
     pairs = parse_assignments(set_, "--set")
+    n_jobs = backend_options(backend, n_jobs, scheduler)
     if out is not None:  # its inputs against the folder's, before the identification
         from ema_cli.api.design import design_inputs
 
@@ -66,9 +76,11 @@ def design_cmd(
     res = as_options(lambda: design(log, config, pairs, tune_config=tune_config, spec=spec,
                                     budget=budget, stage=report_stage,
                                     tune_log=lambda text: err_console.print(text,
-                                                                            highlight=False)),
+                                                                            highlight=False),
+                                    backend=backend, n_jobs=n_jobs, scheduler=scheduler),
                      anywhere=False, tune_config="--tune-config", spec="--spec",
-                     budget="--budget")
+                     budget="--budget", **BACKEND_OPTIONS)
+    print_retries(res.execution)
     report_stage("writing files and figures")
     folder = res.save(out)
     js = res.to_json()

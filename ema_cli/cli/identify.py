@@ -12,6 +12,9 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from ema_cli.cli.common import (
+    BackendOpt,
+    NJobsOpt,
+    SchedulerOpt,
     check_number,
     console,
     err_console,
@@ -96,8 +99,15 @@ FreeOpt = Annotated[list[str] | None, typer.Option(
     "--free", help="--closed-loop: free a parameter with bounds, NAME=LO,HI in SI (e.g. "
                    "Fs=0,0.2); repeatable; added to the default set kL, alpha, Fc, sigma2 "
                    "(a config's free: replaces it).")]
+StartsBackendOpt = Annotated[str | None, typer.Option(
+    "--backend", help="--closed-loop: where the starts run: threads (this process; the "
+                      "default) | loky (worker processes) | dask (a cluster: --scheduler); the "
+                      "same results bit for bit.")]
 StartsOpt = Annotated[int | None, typer.Option(
     "--starts", help="--closed-loop: starts of the multiple-shooting search (8).")]
+AnyJobsOpt = Annotated[int | None, typer.Option(
+    "--n-jobs", help="Parallel processes for the runs (joblib; -1 all cores; default 1); "
+                     "with --closed-loop the workers of --backend (default all cores).")]
 
 
 def torque_pairs(options: dict[str, Any], set_: list[str] | None,
@@ -179,7 +189,7 @@ def identify_cmd(
                          "exact (least squares only); --closed-loop: shooting (default) or "
                          "ga.")] = None,
     runs: RunsOpt = None,
-    n_jobs: JobsOpt = None,
+    n_jobs: AnyJobsOpt = None,
     data: TorqueDataOpt = None,
     columns: ColumnsOpt = None,
     window: WindowOpt = None,
@@ -201,6 +211,8 @@ def identify_cmd(
     make_data: MakeDataOpt = None,
     starts: StartsOpt = None,
     free: FreeOpt = None,
+    backend: StartsBackendOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """The torque-data identification (as `ema identify torque`), or with --closed-loop,
     --friction-sweep or --make-data KIND the log modes (as `ema identify closed-loop`,
@@ -213,15 +225,19 @@ def identify_cmd(
 
         torque_only = {"--k-range": k_range, "--alpha-range": alpha_range, "--c-range": c_range,
                        "--method": method if not closed_loop else None, "--runs": runs,
-                       "--n-jobs": n_jobs,
+                       "--n-jobs": n_jobs if not closed_loop else None,
                        "--damping": damping, "--model": model, "--c": c,
                        "--fit-c/--no-fit-c": fit_c, "--pc": pc, "--pm": pm, "--bits": bits}
         run_log_mode(modes, config=config, data=data, noise=noise, seed=seed, pop=pop,
                      generations=generations, set_=set_, out=out, free=free,
                      make_data=make_data, columns=columns, window=window,
                      method=method if closed_loop else None, starts=starts,
-                     torque_only=[k for k, v in torque_only.items() if v is not None])
+                     torque_only=[k for k, v in torque_only.items() if v is not None],
+                     execution=(backend, n_jobs if closed_loop else None, scheduler))
         return
+    if backend is not None or scheduler is not None:
+        raise EmaError("--backend and --scheduler apply to --closed-loop; the torque-data "
+                       "identification runs its GA runs in processes (--n-jobs)")
     if window is not None:
         raise EmaError("--window applies to --closed-loop, not to the torque-data "
                        "identification")
@@ -285,16 +301,7 @@ def run_torque(config: Path | None, *, k_range: Range | None, alpha_range: Range
     from ema_cli.report.rundir import check_output
 
     check_output(out, "identify")  # a file, a folder of another command: refused at once
-
-    for value, option in ((k_range, "--k-range"), (alpha_range, "--alpha-range"),
-                          (c_range, "--c-range")):
-        for v in value or ():
-            check_number(v, option, low=0.0)
-    check_number(noise, "--noise", low=0.0)
-    check_number(c, "--c", low=0.0)
-    check_number(pc, "--pc", low=0.0, high=1.0)
-    check_number(pm, "--pm", low=0.0, high=1.0)
-    from ema_cli.cli.sweep import check_jobs
+    from ema_cli.cli.common import check_jobs
 
     n_jobs = check_jobs(n_jobs, "--n-jobs")  # capped at the cores available, with a note
     pairs = torque_pairs({
@@ -357,6 +364,9 @@ def closed_loop_cmd(
         "--generations", help="--method ga: evaluated generations (selects the GA).")] = None,
     set_: LogSetOpt = None,
     out: OutOpt = None,
+    backend: BackendOpt = None,
+    n_jobs: NJobsOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Output-error fit of the whole simulator to a closed-loop log (--data LOG) by multiple
     shooting: kL, alpha, Fc, sigma2 (and --free more), 95 % intervals and a verdict.
@@ -367,7 +377,8 @@ def closed_loop_cmd(
 
     run_log_mode(["--closed-loop"], config=config, data=data, noise=None, seed=seed, pop=pop,
                  generations=generations, set_=set_, out=out, free=free, make_data=None,
-                 columns=columns, window=window, method=method, starts=starts, torque_only=[])
+                 columns=columns, window=window, method=method, starts=starts, torque_only=[],
+                 execution=(backend, n_jobs, scheduler))
 
 
 @identify_errors

@@ -71,7 +71,8 @@ def closed_loop_pairs(config: Path | None, pairs: list[tuple[str, Any]],
 
 def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) -> None:
     """Print the identified parameters: value, SE and 95 % interval with units, whether the
-    data determine each, and the truth and error of synthetic data."""
+    data determine each ("nuisance": the contact's parameters freed unless stated, reported
+    but not judged), and the truth and error of synthetic data."""
     from ema_cli.cli.output import print_table
     from ema_cli.units import fmt_num
 
@@ -83,7 +84,8 @@ def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) 
         u = v["unit"]
         row = [n, fmt_num(v["value"], u, 6), fmt_num(v["standard_error"], u, 3),
                f"[{fmt_num(v['ci95'][0], '', 6)}, {fmt_num(v['ci95'][1], u, 6)}]",
-               "yes" if v["determined"] else "NOT DETERMINED"]
+               "nuisance" if v.get("role") == "nuisance"
+               else "yes" if v["determined"] else "NOT DETERMINED"]
         if truth:
             t = truth.get(n)
             row += ["unknown" if t is None else fmt_num(t, u, 6),
@@ -101,8 +103,11 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
                  free: list[str] | None, make_data: str | None,
                  method: str | None = None, starts: int | None = None,
                  torque_only: list[str], columns: list[str] | None = None,
-                 window: str | None = None) -> None:
-    """Check the options of a log mode (one mode; no torque-data options) and run it."""
+                 window: str | None = None,
+                 execution: tuple[str | None, int | None, str | None] = (None, None, None)
+                 ) -> None:
+    """Check the options of a log mode (one mode; no torque-data options) and run it;
+    ``execution``: --backend, --n-jobs, --scheduler (--closed-loop only)."""
     from ema_cli.report.rundir import check_output
 
     if len(modes) > 1:
@@ -126,6 +131,9 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
         raise EmaError(f"--pop and --generations set the GA of --closed-loop, not {mode}")
     if mode != "--closed-loop" and starts is not None:
         raise EmaError(f"--starts sets the search of --closed-loop, not {mode}")
+    if mode != "--closed-loop" and (execution[0] is not None or execution[2] is not None):
+        raise EmaError(f"--backend and --scheduler apply to --closed-loop (its starts), not "
+                       f"to {mode}")
     check_number(noise, "--noise", low=0.0)
     check_output(out, "identify")
     pairs: list[tuple[str, Any]] = list(parse_assignments(set_, "--set"))
@@ -173,7 +181,7 @@ def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,
         if window is not None:
             pairs.append(("window", parse_window(window)))
         pairs = closed_loop_pairs(config, pairs, free)
-        _closed_loop(config, pairs, out)
+        _closed_loop(config, pairs, out, execution)
     else:
         _friction_sweep(config, pairs, out)
 
@@ -200,16 +208,22 @@ def _make_data(config: Path | None, pairs: list[tuple[str, Any]], out: Path | No
                   f"`ema identify {flag} --data {folder / (stem + '.csv')}{keep}`")
 
 
-def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None) -> None:
+def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | None,
+                 execution: tuple[str | None, int | None, str | None]) -> None:
     from ema_cli.api.identify_logs import closed_loop_inputs, identify_closed_loop
+    from ema_cli.cli.common import BACKEND_OPTIONS, backend_options, print_retries
     from ema_cli.report.rundir import check_output
 
+    backend, n_jobs, scheduler = execution
+    n_jobs = backend_options(backend, n_jobs, scheduler)
     if out is not None:  # its inputs against the folder's, before the fit
         check_output(out, "identify", closed_loop_inputs(config, pairs))
     report_stage("reading the log, loading the kernel")
-    ident = as_options(lambda: identify_closed_loop(config, pairs),
+    ident = as_options(lambda: identify_closed_loop(config, pairs, backend=backend,
+                                                    n_jobs=n_jobs, scheduler=scheduler),
                        **{"with window (T0, T1) [s]": "with --window T0,T1",
-                          "data: out of memory": "--data: out of memory"})
+                          "data: out of memory": "--data: out of memory"}, **BACKEND_OPTIONS)
+    print_retries(ident.execution)
     fit = ident.result
     report_stage("writing files and figures")
     folder = ident.save(out)
@@ -227,6 +241,13 @@ def _closed_loop(config: Path | None, pairs: list[tuple[str, Any]], out: Path | 
                    else "[red]optimum NOT confirmed[/] (see the warning)")
         console.print(f"{verdict}: {ms.search.agree} of {len(ms.search.final_cost)} finishing "
                       f"starts agree; estimate from the {ms.source}")
+        ad = js.get("adequacy")
+        if ad is not None:
+            fits = ", ".join(f"{c} {v['fit_percent']:.4g} %" for c, v in ad["channels"].items())
+            console.print(("[green]model adequate[/]: residuals white and independent of the "
+                           "command on every judged channel" if ad["adequate"] else
+                           "[red]model NOT adequate[/] (see the warning)")
+                          + f"; fit {fits}")
         first = (f"multiple shooting {t['search_s'] - t['polish_s']:.1f} s "
                  f"({fit.ga_throughput / 1e6:.1f} M steps/s)")
     else:

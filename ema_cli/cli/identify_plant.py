@@ -98,6 +98,8 @@ def _print(ident: Any, folder: Path) -> None:
                       + "; ".join(f"{k}: force {d['force']:.4g} %" for k, d in s.items()))
     if ident.validation is not None:
         v = ident.validation
+        for note in v.notes:
+            console.print(f"note: {note}")
         console.print(f"validation on {v.record.source}: " + "; ".join(
             f"{k}: force {d.force_pct:.4g} %" + (
                 f", RMS position {v.rms_position_m[k] * 1e6:.4g} um" if v.controller else "")
@@ -148,22 +150,18 @@ def _plant(data: Path, actuator: Path, config: Path | None, columns: list[str] |
            law: str | None, delay: str | None, window: str | None, split: float | None,
            validate: Path | None, set_: list[str] | None, out: Path | None,
            free: list[str] | None = None) -> None:
-    from ema_cli.api.identify_plant import PlantIdentification, plant_inputs, plant_settings
-    from ema_cli.identify.plant.fit import run_plant
-    from ema_cli.identify.plant.fit import validate as validate_fit
+    from ema_cli.api.identify_plant import identify_plant, plant_inputs, plant_settings
     from ema_cli.report.rundir import check_output
 
     pairs = [("data", str(data)), ("actuator", str(actuator)),
              *_pairs(columns, set_, law, delay, window, split, validate, free)]
     settings = plant_settings(config, pairs)
     check_output(out, "identify", plant_inputs(settings))
-    report_stage("reading the record, checking the controller, IDIM-LS")
-    fit = run_plant(settings, report_stage)
-    v = None
-    if settings.validate_data:
-        report_stage("validating on " + Path(settings.validate_data).name)
-        v = validate_fit(fit, settings.validate_data)
-    ident = PlantIdentification(fit, v)
+    report_stage("reading the record, checking the controller, IDIM-LS"
+                 + (f"; validation on {Path(settings.validate_data).name}"
+                    if settings.validate_data else ""))
+    # through the API (cli -> api -> compute), which runs the fit and the validation
+    ident = identify_plant(config=config, overrides=pairs, progress=report_stage)
     report_stage("writing files and figures")
     folder = ident.save(out)
     _print(ident, folder)
@@ -188,6 +186,8 @@ def _validate(folder: Path, data: Path, columns: list[str] | None) -> None:
     console.print(f"validation on {v.record.source} ({v.record.n} samples); " + (
         f"controller check: {v.controller.summary()}" if v.controller is not None else
         "inverse model: the force predicted from the measured motion"))
+    for note in v.notes:
+        console.print(f"note: {note}")
     for k, e in v.errors.items():
         d = e.as_dict()
         if v.controller is None:

@@ -10,12 +10,18 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import (
+    BACKEND_OPTIONS,
+    BackendOpt,
+    NJobsOpt,
+    SchedulerOpt,
     as_options,
+    backend_options,
     console,
     err_console,
     handle_errors,
     out_help,
     parse_assignments,
+    print_retries,
 )
 
 VERDICT_EXIT = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3}
@@ -65,8 +71,11 @@ def yield_cmd(
         "--set", help="Override a spec value by dotted path, e.g. actuator.plant.Kpp=60; "
                       "repeatable.")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help(
-        "an interrupted run of the same inputs there is resumed (finished blocks are kept)"))
-    ] = None,
+        "an interrupted run of the same inputs there is resumed (finished blocks are kept), "
+        "on any backend"))] = None,
+    backend: BackendOpt = None,
+    n_jobs: NJobsOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Sample N units from the tolerances, run every test of SPEC on each (batched across
     units), and report the yield with its exact interval, per test and per limit (a unit with
@@ -89,12 +98,15 @@ def yield_cmd(
                           f"({s['elapsed_s']:.0f} s)", highlight=False)
 
     pairs = parse_assignments(set_, "--set")
+    n_jobs = backend_options(backend, n_jobs, scheduler)
     res = as_options(lambda: production_yield(
         spec, tolerances, pairs, n=n, seed=seed, level=ci, target_halfwidth=target_halfwidth,
         method=method, k=k, block=block, worst_budget=None if no_worst else worst_budget,
-        out=out, checkpoint=True, progress=progress), anywhere=False,
+        out=out, checkpoint=True, progress=progress, backend=backend, n_jobs=n_jobs,
+        scheduler=scheduler), anywhere=False,
         level="--ci", target_halfwidth="--target-halfwidth", worst_budget="--worst-budget",
-        method="--method", block="--block", n="--n", seed="--seed", k="--k")
+        method="--method", block="--block", n="--n", seed="--seed", k="--k", **BACKEND_OPTIONS)
+    print_retries(res.execution)
     from ema_cli.progress import report
 
     report("writing files and figures")

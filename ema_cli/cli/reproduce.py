@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import (
+    check_jobs,
     console,
     err_console,
     handle_errors,
@@ -15,7 +16,6 @@ from ema_cli.cli.common import (
     out_help,
     parse_assignments,
 )
-from ema_cli.cli.sweep import check_jobs
 
 
 @handle_errors

@@ -54,7 +54,7 @@ def sensitivity_cmd(
     if method is not None and method not in ("morris", "sobol"):
         raise EmaError(f"--method must be morris or sobol, got {method!r}")
     check_number(n, "--n", low=1)
-    from ema_cli.cli.sweep import check_jobs
+    from ema_cli.cli.common import check_jobs
     from ema_cli.limits import BACKENDS
 
     n_jobs = check_jobs(n_jobs, "--n-jobs", scheduler)

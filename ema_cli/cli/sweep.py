@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from ema_cli.cli.common import (
-    check_number,
+    check_jobs,
     console,
     err_console,
     handle_errors,
@@ -24,18 +24,6 @@ if TYPE_CHECKING:
 MAX_TABLE_ROWS = 40  # rows of the terminal summary table (metrics.csv has every job)
 MAX_TABLE_METRICS = 4  # metric columns of the terminal summary table
 MAX_SHOW_JOBS = 50  # jobs listed by `ema show` unless --all
-def check_jobs(n_jobs: int | None, option: str, scheduler: str | None = None) -> int | None:
-    """``--n-jobs``: -1 (all cores) or 1 .. MAX_WORKERS -> the count to use, capped at the
-    cores available (with a note) unless a cluster ``scheduler`` is given."""
-    from ema_cli.limits import MAX_WORKERS, cap_workers
-
-    if n_jobs is not None and n_jobs != -1:
-        check_number(n_jobs, option + " (-1: all cores)", low=1, high=MAX_WORKERS)
-    n_jobs, note = cap_workers(n_jobs, option, cluster=scheduler is not None)
-    if note:
-        err_console.print(f"note: {note}", highlight=False)
-    return n_jobs
-
 ConfigArg = Annotated[Path, typer.Argument(help="YAML study config, e.g. configs/deadzone2.yaml.")]
 SetOpt = Annotated[list[str] | None, typer.Option(
     "--set", help="Override a config value by dotted path (list items by index), e.g. "

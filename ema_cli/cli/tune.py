@@ -8,12 +8,18 @@ from typing import Annotated
 import typer
 
 from ema_cli.cli.common import (
+    BACKEND_OPTIONS,
+    BackendOpt,
+    NJobsOpt,
+    SchedulerOpt,
     as_options,
+    backend_options,
     console,
     err_console,
     handle_errors,
     out_help,
     parse_assignments,
+    print_retries,
 )
 from ema_cli.progress import report as report_stage
 
@@ -36,6 +42,9 @@ def tune_cmd(
         "--set", help="Override a config value by dotted path, e.g. "
                       "variables.Kpp.bounds=[20,100] or optimiser.seed=3; repeatable.")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help())] = None,
+    backend: BackendOpt = None,
+    n_jobs: NJobsOpt = None,
+    scheduler: SchedulerOpt = None,
 ) -> None:
     """Tune the controller of CONFIG: its free variables (gains and compensator parameters,
     with bounds) minimise the cost over its scenarios (by default the mean ITAE ratio to the
@@ -51,6 +60,7 @@ def tune_cmd(
         raise EmaError(f"config '{config}' is not a file (a tuning config, e.g. "
                        "configs/tune.yaml)")
     pairs = parse_assignments(set_, "--set")
+    n_jobs = backend_options(backend, n_jobs, scheduler)
     if out is not None:  # its inputs against the folder's, before the tuning
         from ema_cli.api.tune import tune_inputs
 
@@ -64,8 +74,10 @@ def tune_cmd(
 
     res = as_options(lambda: tune(config, pairs, method=method, runs=runs, budget=budget,
                                   progress=progress,
-                                  log=lambda text: err_console.print(text, highlight=False)),
-                     method="--method", runs="--runs", budget="--budget")
+                                  log=lambda text: err_console.print(text, highlight=False),
+                                  backend=backend, n_jobs=n_jobs, scheduler=scheduler),
+                     method="--method", runs="--runs", budget="--budget", **BACKEND_OPTIONS)
+    print_retries(res.execution)
     report_stage("writing files and figures")
     folder = res.save(out)
     o = res.outcome

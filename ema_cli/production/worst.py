@@ -103,14 +103,32 @@ class _TestProblem:
         return m.min(axis=1)
 
 
+def search_test(plan: YieldPlan, name: str, lower: np.ndarray, upper: np.ndarray,
+                labels: list[str], seed: int, budget: int,
+                predicted: list[np.ndarray]) -> list[pd.DataFrame]:
+    """One test's search (stages 1 and 2 of the module docstring; a task of its own on the
+    executor) -> the rows of every unit it evaluated (``stage``: corner or search)."""
+    from ema_cli.optim.de import DEOptions, run_de
+
+    prob = _TestProblem(plan, name, lower, upper, labels)
+    prob.run(corners(lower, upper, seed, predicted), "corner")
+    if budget > 0:
+        pop = max(5, min(budget, 2 * len(lower)))
+        run_de(prob, DEOptions(pop=pop, budget=max(budget, pop)),
+               np.random.default_rng([seed, 11]))
+    return prob.frames
+
+
 def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int, seed: int,
            drivers: list[dict[str, Any]] | None = None) -> WorstCase:
     """The worst case of every limit of ``plan`` (module docstring); ``budget``: the units
-    differential evolution may evaluate per test (0: corners and centre only)."""
+    differential evolution may evaluate per test (0: corners and centre only). The tests'
+    searches are independent: each is a task on the current executor
+    (``sweep.executor.current``), results in the tests' order."""
     import pandas as pd
 
-    from ema_cli.optim.de import DEOptions, run_de
-    from ema_cli.production.run import run_block
+    from ema_cli.production.run import run_task
+    from ema_cli.sweep.executor import Task, current
 
     tol = plan.tolerances
     lower, upper = tol.box()
@@ -121,20 +139,15 @@ def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int, seed: int
         X = samples[paths].to_numpy(dtype=float)
         inside = samples[np.all((lower <= X) & (upper >= X), axis=1)].copy()
         inside["stage"] = "sampled"
-    for name in plan.names:
-        labels = [r.label for r in plan.rows if r.test == name]
-        if not labels:  # a test without limits has no margin to search
-            continue
-        prob = _TestProblem(plan, name, lower, upper, labels)
-        prob.run(corners(lower, upper, seed,
-                         predicted_corners(drivers or [], paths, labels)), "corner")
-        if budget > 0:
-            pop = max(5, min(budget, 2 * len(paths)))
-            run_de(prob, DEOptions(pop=pop, budget=max(budget, pop)),
-                   np.random.default_rng([seed, 11]))
-        frames = prob.frames + ([inside] if inside is not None else [])
-        seen = pd.concat(frames, ignore_index=True)
-        out.evaluated[name] = sum(len(f) for f in prob.frames)
+    tests = {name: [r.label for r in plan.rows if r.test == name] for name in plan.names}
+    tests = {name: labels for name, labels in tests.items() if labels}  # a test without
+    ex = current()                                               # limits has no margin
+    found = ex.run(Task(search_test, (plan, name, lower, upper, labels, seed, budget,
+                                      predicted_corners(drivers or [], paths, labels)),
+                        f"worst case of test {name}") for name, labels in tests.items())
+    for name, frames in zip(tests, found, strict=True):
+        seen = pd.concat(frames + ([inside] if inside is not None else []), ignore_index=True)
+        out.evaluated[name] = sum(len(f) for f in frames)
         for r in (r for r in plan.rows if r.test == name):
             m = seen[f"{r.label} margin"].to_numpy(dtype=float)
             if not np.isfinite(m).any():
@@ -151,7 +164,8 @@ def search(plan: YieldPlan, samples: pd.DataFrame | None, budget: int, seed: int
     worst = [v for v in out.limits.values() if v["found"]]
     if worst:
         U = np.unique(np.array([[v["values"][p] for p in paths] for v in worst]), axis=0)
-        bat, _ = run_block(plan, 0, U, what="worst units, whole battery")
+        bat = ex.run([Task(run_task, (plan, 0, U, "worst units, whole battery"),
+                             "worst units, whole battery")])[0].frame
         keys = [tuple(row) for row in U]
         for v in worst:
             v["battery"] = str(bat["result"].iloc[keys.index(

@@ -92,5 +92,6 @@ def write_design(folder: Path, result: Any) -> list[str]:
         "design", outputs=names, log=js["log"], verdict=js["verdict"],
         tune_config=result.tune_source, spec=result.spec_source,
         config=result.config.model_dump(mode="json"),
-        overrides=[[k, v] for k, v in result.overrides], wall_time_s=js["timings_s"]))
+        overrides=[[k, v] for k, v in result.overrides], wall_time_s=js["timings_s"],
+        execution=result.execution))
     return names

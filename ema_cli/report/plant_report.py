@@ -18,7 +18,8 @@ from ema_cli.report.markdown import md_cell
 from ema_cli.report.rundir import manifest, write_columns, write_figure, write_json, write_text
 
 if TYPE_CHECKING:
-    from ema_cli.identify.plant.fit import LawFit, PlantFit, PlantValidation
+    from ema_cli.identify.plant.fit import LawFit, PlantFit
+    from ema_cli.identify.plant.validation import PlantValidation
 
 TERM_UNITS = {
     "translational": {"M": "kg", "Fv": "N*s/m", "Fc": "N", "OF": "N"},
@@ -187,6 +188,7 @@ def validation_markdown(v: PlantValidation) -> str:
     check = ("controller check: " + md_cell(v.controller.summary()) if v.controller is not None
              else "inverse model: the force predicted from the measured motion")
     lines = [f"Record {md_cell(v.record.source)}: {v.record.n} samples; {check}.", "",
+             *[f"Note: {md_cell(n)}" for n in v.notes], *([""] if v.notes else []),
              "| model | position | velocity | acceleration | force | RMS position error |",
              "|---|---|---|---|---|---|"]
     for k, e in v.errors.items():
@@ -342,6 +344,7 @@ def write_plant(fit: PlantFit, out: Path, validation: PlantValidation | None = N
         js["validation"] = {"source": validation.record.source,
                             "errors_pct": {k: v.as_dict() for k, v in validation.errors.items()},
                             "rms_position_m": validation.rms_position_m,
+                            "notes": validation.notes,
                             "controller_check": validation.controller.as_dict()}
     write_json(out / "plant.json", js)
     write_text(out / "plant.md", plant_markdown(fit, validation))
@@ -389,7 +392,7 @@ def write_validation(v: PlantValidation, out: Path, axis: str) -> list[str]:
     write_text(out / "validation.md", "# Validation\n\n" + validation_markdown(v) + "\n")
     write_json(out / "validation.json", {
         "source": v.record.source, "errors_pct": {k: e.as_dict() for k, e in v.errors.items()},
-        "rms_position_m": v.rms_position_m,
+        "rms_position_m": v.rms_position_m, "notes": v.notes,
         "controller_check": None if v.controller is None else v.controller.as_dict()})
     files = ["validation.md", "validation.json"]
     if v.sims:

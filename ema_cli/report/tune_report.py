@@ -182,4 +182,4 @@ def write_tuning(folder: Path, config_yaml: str, res: Any) -> None:
         seeds=[r.seed for r in o.runs], budget=o.runs[0].result.evaluations,
         cost=float(o.after.cost[0]), feasible=o.feasible, tuned=res.tuned,
         wall_time_s=o.wall_s, timings=o.timings, source=res.source,
-        overrides=[[k, v] for k, v in res.overrides]))
+        overrides=[[k, v] for k, v in res.overrides], execution=res.execution))

@@ -337,5 +337,6 @@ def write_yield(folder: Path, res: Any) -> list[str]:
     names.append("manifest.json")
     write_json(folder / "manifest.json", manifest(
         "yield", outputs=names, source=str(res.plan.spec_source), seed=res.plan.seed,
-        settings=res.settings, timings_s=res.timings, resumed_units=res.resumed_units))
+        settings=res.settings, timings_s=res.timings, resumed_units=res.resumed_units,
+        execution=res.execution))
     return names

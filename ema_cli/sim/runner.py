@@ -13,11 +13,13 @@ for bit the run done in one call. The recorded signals are checked against a mem
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import os
+import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -71,6 +73,21 @@ TALLY = {"lane_steps": 0, "kernel_s": 0.0, "calls": 0}
 """Every :func:`simulate_batch` of this process adds its cases x steps, its time inside the
 compiled kernel [s] and 1 call: benchmarks read it (reset it to zero first) for the kernel's
 throughput inside a command. Counting only, never read by a computation."""
+_THREAD = threading.local()  # per thread: ``serial`` (see serial_kernels)
+
+
+@contextlib.contextmanager
+def serial_kernels(on: bool = True) -> Iterator[None]:
+    """While the block runs, every :func:`simulate_batch` of this thread uses the serial
+    kernel entry points, whatever ``parallel`` its caller asks: no numba threading layer, safe
+    in a thread among others (a Dask worker running several tasks at once; the workqueue layer
+    aborts on concurrent launches). The results are the same bits."""
+    previous = getattr(_THREAD, "serial", False)
+    _THREAD.serial = previous or on
+    try:
+        yield
+    finally:
+        _THREAD.serial = previous
 
 
 @dataclass
@@ -333,6 +350,7 @@ def simulate_batch(
         raise ValueError(f"P must have shape (n_cases, {N_PARAMS}), got {P.shape}")
     check_sample_times(P, dt)
     dt, n_steps, dec = float(dt), int(n_steps), int(dec)
+    parallel = parallel and not getattr(_THREAD, "serial", False)
     n_cases = P.shape[0]
     if ref_index is None:
         ref_index = np.zeros(n_cases, dtype=np.int64)

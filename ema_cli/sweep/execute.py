@@ -1,41 +1,47 @@
-"""Parallel execution of sweep chunks: in-process (serial or numba threads), loky or dask.
+"""Sweep chunks on the executor (``sweep.executor``): in-process (serial or numba threads),
+loky or dask.
 
 One level of parallelism at a time: either threads over blocks of one chunk in this
 process (backend ``threads``), or worker processes (``loky``) / a Dask cluster (``dask``) each
 running whole chunks with numba pinned to one thread. The kernel is warmed in the parent before
 any worker starts, so workers only load it from numba's on-disk cache. Each chunk is one kernel
-call; its results come back to the parent, which alone writes files.
+call; its results come back to the parent, which alone writes files. A chunk whose worker was
+lost is run again; one lost twice is reported as its jobs' error.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-import os
-import re
 import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from ema_cli.errors import EmaError
 from ema_cli.sim.runner import simulate_batch
 from ema_cli.sim.signals import InputSignal, Sampler, sampler
 from ema_cli.sim.tables import N_SIGNALS
+from ema_cli.sweep.executor import (  # noqa: F401 (re-exported: the sweep's names for them)
+    BACKENDS,
+    DASK_HINT,
+    LOCAL_DEFAULT,
+    SCHEDULER_ADDRESS,
+    Executor,
+    Failure,
+    Task,
+    check_dask,
+    cpu_count,
+    resolve_backend,
+    resolve_workers,
+)
 
-BACKENDS = ("auto", "loky", "threads", "dask")
-LOCAL_DEFAULT = "threads"
-"""What ``auto`` means on one machine: threads in this process (numba's thread count). Measured with
-experiments/bench_sweep.py (1,000 jobs of 1 s, 2 cores, fresh processes, medians of 5): threads
-3.85 s end to end, loky 4.73 s; the kernel time is the same (3.43 s vs 3.46 s), loky's extra
-~1 s is starting the workers and loading the kernel in each."""
 CHUNKS_PER_WORKER = 4  # chunks per worker: progress granularity and load balance [-]
 MAX_CHUNK_CASE_STEPS = 30_000_000  # cap on jobs*steps per worker per chunk (~1 s of kernel) [-]
 MAX_CHUNK_SIGNAL_BYTES = 256 * 2**20  # cap on the recorded signals one chunk returns [bytes]
 WARM_STEPS = 4  # steps of the tiny run that loads the compiled kernel before workers start [-]
-DASK_HINT = "the dask backend needs dask.distributed: pip install 'ema-cli[dask]'"
 
 
 @dataclass
@@ -50,35 +56,6 @@ class ChunkOutput:
     signals: np.ndarray | None
     kernel_s: float
     error: str | None = None
-
-
-def cpu_count() -> int:
-    """Cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
-def resolve_workers(n_jobs: int | None) -> int:
-    """``n_jobs`` (None or -1: all cores) -> a worker count >= 1."""
-    if n_jobs is None or n_jobs == -1:
-        return cpu_count()
-    if n_jobs < 1:
-        raise EmaError(f"n_jobs must be >= 1, or -1 for all cores, got {n_jobs}")
-    return n_jobs
-
-
-def resolve_backend(backend: str | None, workers: int) -> str:
-    """The backend to run: ``auto`` picks the local default; one worker runs serially."""
-    backend = backend or "auto"
-    if backend not in BACKENDS:
-        raise EmaError(f"unknown backend '{backend}'; expected one of {', '.join(BACKENDS)}")
-    if backend == "auto":
-        backend = LOCAL_DEFAULT
-    if backend in ("loky", "threads") and workers == 1:
-        return "serial"
-    return backend
 
 
 def chunk_sizes(n: int, n_steps: int, workers: int, backend: str, n_out: int,
@@ -125,9 +102,10 @@ def run_chunk(P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
               threads: int, n_signals: int | None = None) -> ChunkOutput:
     """Worker side: one kernel call on the parameter matrix ``P`` (SI) with ``threads`` threads.
 
-    ``threads`` = 0 runs the kernel in this thread (used on Dask workers); ``threads`` >= 1
-    spreads blocks of the chunk over that many threads (``sim.runner.simulate_batch``). Both
-    run the same compiled entry point and give bit-identical results. Exceptions are
+    ``threads`` = 0 runs the kernel in this thread; ``threads`` >= 1 spreads blocks of the
+    chunk over that many threads (``sim.runner.simulate_batch``; on a Dask worker running
+    several task threads, the executor makes it one thread). Both run the same compiled entry
+    point and give bit-identical results. Exceptions are
     returned as text so one bad chunk does not stop the sweep. ``n_signals``: the signals
     every chunk of the sweep records (``sim.runner.signal_count`` of all its jobs).
     """
@@ -178,82 +156,58 @@ OnChunk = Callable[[int, ChunkOutput], None]
 
 def execute(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int, dec: int,
             backend: str, workers: int, on_chunk: OnChunk, scheduler: str | None = None,
-            n_signals: int | None = None) -> None:
-    """Run every chunk (a parameter matrix) and call ``on_chunk(i, output)`` in the parent as
-    each finishes (in completion order). KeyboardInterrupt stops the workers and propagates.
-    """
+            n_signals: int | None = None, labels: Sequence[str] | None = None
+            ) -> list[tuple[str, str]]:
+    """Run every chunk (a parameter matrix) on the backend (``sweep.executor``) and call
+    ``on_chunk(i, output)`` in the parent as each finishes (in completion order). A chunk
+    whose worker was lost is run again; one lost twice comes back as an error naming its
+    ``labels[i]`` (its jobs are marked failed). KeyboardInterrupt stops the workers and
+    propagates. Returns the chunks run again: (label, why) each."""
     if not chunks:
-        return
-    if backend in ("serial", "threads"):
-        threads = 1 if backend == "serial" else workers
-        for i, P in enumerate(chunks):
-            on_chunk(i, run_chunk(P, signal, dt, n_steps, dec, threads, n_signals))
-        return
-    if backend == "loky":
-        _execute_joblib(chunks, signal, dt, n_steps, dec, workers, on_chunk, "loky", threads=1,
-                        n_signals=n_signals)
-        return
-    if backend == "dask":
-        _execute_dask(chunks, signal, dt, n_steps, dec, on_chunk, scheduler, n_signals)
-        return
-    raise EmaError(f"unknown backend '{backend}'; expected one of {', '.join(BACKENDS)}")
+        return []
+    with Executor(backend, workers, scheduler) as ex:
+        threads = workers if ex.backend == "threads" else 1
+        if ex.backend == "dask":  # warm the kernel on every worker once: no race to compile
+            ex.run_on_workers(warm_kernel, signal, dt, 0)
+        tasks = (Task(run_chunk, (P, signal, dt, n_steps, dec, threads, n_signals),
+                      labels[i] if labels else f"chunk {i + 1}") for i, P in enumerate(chunks))
+        for i, out in ex.map(tasks, ordered=False, failures="return"):
+            if isinstance(out, Failure):
+                out = ChunkOutput(None, None, 0.0, out.message)
+            on_chunk(i, out)
+        return ex.retries
 
 
-def _indexed(i: int, P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
-             threads: int, n_signals: int | None = None) -> tuple[int, ChunkOutput]:
-    return i, run_chunk(P, signal, dt, n_steps, dec, threads, n_signals)
+MIN_BLOCK_CASE_STEPS = 10_000_000
+"""Fewest cases x steps in one block of a batch cut over remote workers (:func:`spread_batch`):
+about 0.2 s of kernel on one core at ``progress.CPU_S_PER_STEP``, against the Dask round trip
+of a block (``make bench``: experiments/bench_scale.py measures it)."""
 
 
-def _execute_joblib(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int,
-                    dec: int, workers: int, on_chunk: OnChunk, backend: str | None,
-                    threads: int, n_signals: int | None = None) -> None:
-    """joblib over the chunks; ``backend`` None: the one set by ``joblib.parallel_config``."""
-    from joblib import Parallel, delayed
-
-    tasks = (delayed(_indexed)(i, P, signal, dt, n_steps, dec, threads, n_signals)
-             for i, P in enumerate(chunks))
-    kwargs = {} if backend is None else {"backend": backend}
-    par = Parallel(n_jobs=workers, return_as="generator_unordered", **kwargs)
-    for i, out in par(tasks):
-        on_chunk(i, out)
+def batch_task(P: np.ndarray, refs: Sequence[Any], ref_index: np.ndarray, dt: float,
+               n_steps: int, dec: int) -> Any:
+    """Worker side of :func:`spread_batch`: one kernel call (numba's threads as the executor
+    set them)."""
+    return simulate_batch(P, refs, ref_index, dt, n_steps, dec, parallel=True)
 
 
-SCHEDULER_ADDRESS = re.compile(
-    r"(?:(?:tcp|tls|ucx|ws|wss)://)?(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):[0-9]{1,5}")
-"""What a dask scheduler address looks like: [tcp://]host:port (tls, ucx, ws(s) too)."""
+def spread_batch(P: np.ndarray, refs: Sequence[Any], ref_index: np.ndarray, dt: float,
+                 n_steps: int, what: str = "rows") -> Any:
+    """``simulate_batch(P, refs, ref_index, dt, n_steps)`` (metrics only) on the current
+    executor (``sweep.executor.current``): in this process one batched call; on remote workers
+    the rows cut into one block per worker (each at least :data:`MIN_BLOCK_CASE_STEPS`),
+    merged back in row order -> a ``BatchResult`` with the same bits (``kernel_s`` summed
+    over the blocks). ``what`` names the rows in a block's label."""
+    from ema_cli.sim.runner import BatchResult
+    from ema_cli.sweep.executor import current, split
 
-
-def check_dask(scheduler: str | None) -> None:
-    """Refuse the dask backend early: no scheduler address, or dask.distributed missing."""
-    if not scheduler:
-        raise EmaError("the dask backend needs a scheduler address: --scheduler ADDRESS "
-                       "(or parallel.scheduler in the config)")
-    if not SCHEDULER_ADDRESS.fullmatch(scheduler.strip()):
-        raise EmaError(f"--scheduler {scheduler!r} is not a dask scheduler address; expected "
-                       "tcp://HOST:PORT or HOST:PORT (or parallel.scheduler in the config)")
-    try:
-        import dask.distributed  # noqa: F401
-    except ImportError:
-        raise EmaError(DASK_HINT) from None
-
-
-def _execute_dask(chunks: Sequence[np.ndarray], signal: Source, dt: float, n_steps: int,
-                  dec: int, on_chunk: OnChunk, scheduler: str | None,
-                  n_signals: int | None = None) -> None:
-    check_dask(scheduler)
-    from dask.distributed import Client
-    from joblib import parallel_config
-
-    try:
-        client = Client(scheduler, timeout="10s", set_as_default=False)
-    except (OSError, TimeoutError) as exc:
-        raise EmaError(f"cannot reach the dask scheduler at {scheduler!r}: {exc}", 1) from None
-    try:
-        n_workers = max(1, sum(client.nthreads().values()))
-        # warm the kernel on every worker once, so chunks do not race to compile it
-        client.run(warm_kernel, signal, dt, 0)
-        with client.as_current(), parallel_config(backend="dask"):
-            _execute_joblib(chunks, signal, dt, n_steps, dec, n_workers, on_chunk, None,
-                            threads=0, n_signals=n_signals)
-    finally:
-        client.close()
+    ex = current()
+    bounds = split(P.shape[0], math.ceil(MIN_BLOCK_CASE_STEPS / max(n_steps, 1)))
+    if not ex.remote or len(bounds) < 2:
+        return simulate_batch(P, refs, ref_index, dt, n_steps, 0, parallel=True)
+    parts = ex.run(Task(batch_task, (P[a:b], refs, ref_index[a:b], dt, n_steps, 0),
+                        f"{what} {a}-{b - 1}") for a, b in bounds)
+    first = parts[0]
+    return BatchResult(P, np.concatenate([p.metrics for p in parts]), None, first.t_out,
+                       first.dt, first.n_steps, 0, sum(p.kernel_s for p in parts),
+                       sum(p.load_s for p in parts))

@@ -299,8 +299,11 @@ class _Run:
                 timings["warm"] = warm_kernel(reference, plan.dt, 1)  # the threaded run
             t1 = time.perf_counter()
             try:
-                execute(chunks, reference, plan.dt, plan.n_steps, plan.dec, setup.backend,
-                        setup.workers, self.on_chunk, setup.scheduler, plan.n_signals)
+                retried = execute(chunks, reference, plan.dt, plan.n_steps, plan.dec,
+                                  setup.backend, setup.workers, self.on_chunk,
+                                  setup.scheduler, plan.n_signals,
+                                  [self.chunk_label(keys) for keys in self.chunk_keys])
+                self.warnings += [f"{label}: run again ({why})" for label, why in retried]
                 tw = time.perf_counter()
                 self.settle()
                 timings["writes"] += time.perf_counter() - tw
@@ -311,6 +314,11 @@ class _Run:
                     raise
                 self.fail_unfinished(f"{type(exc).__name__}: {exc}")
             timings["execute"] = time.perf_counter() - t1
+
+    def chunk_label(self, keys: Sequence[str]) -> str:
+        """What a chunk holds, for a retry or a failure: ``jobs j0010..j0019 (10)``."""
+        ids = [self.plan.jobs[self.first[k]].id for k in keys]
+        return f"job {ids[0]}" if len(ids) == 1 else f"jobs {ids[0]}..{ids[-1]} ({len(ids)})"
 
     def close(self) -> None:
         """Finish the chunk being stored (an aborted sweep too) and stop the store thread."""

@@ -254,9 +254,18 @@ class TuneProblem:
         return P.reshape(n * n_s, -1)
 
     def simulate(self, P: np.ndarray, ref_index: np.ndarray, dec: int = 0) -> BatchResult:
+        """Rows ``P`` (SI), row r on scenario ``ref_index[r]``, with signals every ``dec``
+        steps (0: metrics only: then cut over the executor's workers, ``sweep.execute.
+        spread_batch``, the same bits)."""
         t0 = time.perf_counter()
-        res = simulate_batch(P, self.refs, ref_index, self.dt, self.n_steps, dec,
-                             parallel=self.parallel)
+        if dec == 0 and self.parallel:
+            from ema_cli.sweep.execute import spread_batch
+
+            res = spread_batch(P, self.refs, ref_index, self.dt, self.n_steps,
+                               "candidate rows")
+        else:
+            res = simulate_batch(P, self.refs, ref_index, self.dt, self.n_steps, dec,
+                                 parallel=self.parallel)
         self.kernel_s += time.perf_counter() - t0
         return res
 

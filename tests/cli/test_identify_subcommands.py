@@ -128,15 +128,16 @@ def test_closed_loop_both_spellings_reach_the_api_with_the_same_inputs(monkeypat
 
     seen: list[tuple] = []
 
-    def record(config, pairs):
-        seen.append((config, pairs))
+    def record(config, pairs, **execution):
+        seen.append((config, pairs, execution))
         raise EmaError("recorded")
 
     monkeypatch.setattr(api, "identify_closed_loop", record)
     log = tmp_path / "log.csv"
     log.write_text("t_s,theta_ref_deg,theta_load_deg\n0,0,0\n0.001,0,0\n")
     common = ["--data", log, "--free", "Fs=0,0.2", "--window", "0,0.001", "--starts", "3",
-              "--seed", "7", "--set", "plant.contact_tau=1e-4", "--columns", "t_s=t_s:s"]
+              "--seed", "7", "--set", "plant.contact_tau=1e-4", "--columns", "t_s=t_s:s",
+              "--backend", "loky", "--n-jobs", "1"]
     for spelling in (["--closed-loop"], ["closed-loop"]):
         r, text = invoke(*spelling, *common)
         assert r.exit_code == 2 and "recorded" in text, text
@@ -147,6 +148,7 @@ def test_closed_loop_both_spellings_reach_the_api_with_the_same_inputs(monkeypat
     assert len(seen) == 4
     assert seen[0] == seen[1] and seen[2] == seen[3]
     assert ("free.Fs", [0.0, 0.2]) in seen[0][1] and ("search", "ga") in seen[2][1]
+    assert seen[0][2] == {"backend": "loky", "n_jobs": 1, "scheduler": None}
 
 
 def test_registering_a_subcommand_is_one_pair(monkeypatch):
@@ -170,3 +172,30 @@ def test_registering_a_subcommand_is_one_pair(monkeypatch):
     assert r.exit_code == 0 and "extra ran" in r.output, r.output
     r = runner.invoke(root, ["identify", "--help"], env={"COLUMNS": "100"})
     assert "with a summary longer than click's 45 characters" in " ".join(r.output.split())
+
+
+@pytest.mark.parametrize(("ref", "needles"), [
+    (None, ["log.csv", "theta_ref_deg"]),  # the actuation (command) channel missing
+    ("const", ["log.csv", "theta_ref_deg", "is constant", "does not excite"]),
+])
+def test_a_missing_or_constant_command_is_one_line_naming_file_and_channel(
+        tmp_path, capsys, ref, needles):
+    import numpy as np
+
+    t = np.arange(200) * 1e-3
+    cols = {"t_s": t, "theta_load_deg": np.sin(20 * t)}
+    if ref == "const":
+        cols["theta_ref_deg"] = np.full_like(t, 2.0)
+    log = tmp_path / "log.csv"
+    names = list(cols)
+    log.write_text(",".join(names) + "\n" + "\n".join(
+        ",".join(f"{cols[c][i]:.6g}" for c in names) for i in range(t.shape[0])) + "\n")
+    code = main.run(["identify", "closed-loop", "--data", str(log),
+                     "--out", str(tmp_path / "never")])
+    cap = capsys.readouterr()
+    lines = [ln for ln in (cap.out + cap.err).splitlines()
+             if ln.strip() and not ln.startswith("identify: ")]  # progress lines apart
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error:"), lines
+    for n in needles:
+        assert n in lines[0], lines[0]
+    assert not (tmp_path / "never").exists()

@@ -21,10 +21,12 @@ STEP = 5e-8  # the EMPS encoder's step in load coordinates [m]
 
 
 def make_record(path: Path, truth: dict[str, float], seconds: float = 8.0,
-                noise_v: float = 0.01, seed: int = 7) -> Path:
+                noise_v: float = 0.01, seed: int = 7, pulses_v: float = 0.0) -> Path:
     """Write a .mat record (EMPS layout) of the description with the terms ``truth`` (M, Fv+,
     Fc+, Fv-, Fc-, OF in SI) over the first ``seconds`` of the EMPS reference, ``noise_v`` [V]
-    the disturbance's standard deviation -> path."""
+    the disturbance's standard deviation, ``pulses_v`` [V] the height of 50 ms pulses every
+    second added to the controller's output and logged with it in ``vir`` (as a record with
+    force pulses) -> path."""
     from ema_cli.config.loader import load_config, resolve_params
     from ema_cli.identify.plant.output_error import ClosedLoopPlant
     from ema_cli.identify.plant.records import read_plant_mat
@@ -38,6 +40,10 @@ def make_record(path: Path, truth: dict[str, float], seconds: float = 8.0,
     tk = tuple(np.arange(n) * 1e-3)
     rng = np.random.default_rng(seed)
     d = noise_v * rng.standard_normal(n)
+    k = np.arange(n)
+    pulses = pulses_v * (((k % 1000) >= 500) & ((k % 1000) < 550)) * np.where(k % 2000 < 1000,
+                                                                               1.0, -1.0)
+    d = d + pulses
     sig = InputSignal(kind="csv", table=(tk, tuple(ref)), path="truth", ext_table=(tk, tuple(d)),
                       ext_hold=True, ext_name="noise")
     base = {**base, "dist_out": 1.0}
@@ -45,7 +51,8 @@ def make_record(path: Path, truth: dict[str, float], seconds: float = 8.0,
     plant = ClosedLoopPlant(base, lambda raw: resolve_params(raw, {}, "sigma2"), sig, 1e-4,
                             (n - 1) * 10, 10, n, names, True)
     F, q, _, _ = plant.motion(np.array([truth[k] for k in names]))
-    vir = F / GTAU - d  # the controller's output: the amplifier got it plus the noise
+    vir = F / GTAU - d + pulses  # the controller's output (+ the logged pulses): the
+    # amplifier got the command plus the noise
     qm = np.round(q / STEP) * STEP
     savemat(path, {"t": (np.arange(n) * 1e-3)[:, None], "qm": qm[:, None], "qg": ref[:, None],
                    "vir": vir[:, None], "gtau": np.array([[GTAU]]),

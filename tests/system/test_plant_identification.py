@@ -133,3 +133,18 @@ def test_a_stribeck_law_freed_by_free(tmp_path):
     strib = next(o for o in a.omitted if o.name.startswith("Stribeck"))
     assert strib.missed and strib.coefficient > 0, a.reasons
 
+
+
+def test_validation_on_a_record_with_logged_pulses(tmp_path):
+    """A validation record whose logged command carries pulses the law does not compute: the
+    difference is applied as a disturbance (said in a note) and the fitted model predicts the
+    record as well as the one it was fitted on."""
+    from ema_cli.identify.plant.validation import validate
+
+    fit = _fit(tmp_path, SYM, "symmetric")
+    val = make_record(tmp_path / "pulses.mat", SYM, seconds=6.0, noise_v=0.07, seed=11,
+                      pulses_v=1.0)
+    v = validate(fit, val)
+    assert any("departs from the described law" in n for n in v.notes), v.notes
+    own = fit.errors["output error"].force_pct
+    assert v.errors["output error"].force_pct < 1.5 * own, (v.errors, own)

@@ -128,6 +128,8 @@ SUB_ROUTES = {
     ("identify", "closed-loop"): "ema_cli.api.identify_logs.identify_closed_loop",
     ("identify", "friction-sweep"): "ema_cli.api.identify_logs.identify_friction_sweep",
     ("identify", "make-data"): "ema_cli.api.identify_logs.make_identification_data",
+    ("identify", "plant"): "ema_cli.api.identify_plant.identify_plant",
+    ("identify", "validate"): "ema_cli.api.identify_plant.validate_folder",
 }
 """The API function each subcommand's route goes through (cli.main.GROUPS)."""
 

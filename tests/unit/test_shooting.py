@@ -261,6 +261,10 @@ def test_a_model_that_cannot_explain_the_log_is_not_confirmed():
     why = js["optimum"]["not_confirmed_because"]
     assert any("noise level" in r and "worst at t = " in r for r in why), why
     assert set(js["not_determined"]) == {"kL", "alpha", "Fc", "sigma2"}
+    # the second part of the verdict says it too, naming the channel
+    ad = js["adequacy"]
+    assert ad["adequate"] is False and ad["failures"], ad
+    assert all(f.split(":")[0] in js["data"]["channels"] for f in ad["failures"]), ad
 
 
 def test_a_runner_up_that_disagrees_widens_the_intervals_to_both(monkeypatch):
@@ -277,6 +281,8 @@ def test_a_runner_up_that_disagrees_widens_the_intervals_to_both(monkeypatch):
         lg.runner.x = lg.runner.x.copy()
         lg.runner.x[0] *= 1.5  # kL
         moved["kL"] = float(lg.runner.x[0])
+        for length, x in lg.runner.x_at.items():  # on every segment length it was fitted on
+            lg.runner.x_at[length] = x * np.r_[1.5, np.ones(x.shape[0] - 1)]
         return lg
 
     monkeypatch.setattr(sf, "lengthen_both", fake)

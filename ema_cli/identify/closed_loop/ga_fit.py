@@ -99,6 +99,9 @@ class ClosedLoopFit:
     warnings: list[str] = field(default_factory=list)
     quadratic_ratio: np.ndarray | None = None  # see quadratic_check
     shooting: ShootingOutcome | None = None  # the multiple-shooting stage (search: shooting)
+    adequacy: dict[str, Any] | None = None
+    """Whether the model is adequate for the log (:mod:`adequacy`): residual whiteness and
+    cross-correlation with the command per channel, fit %, where it fails."""
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -146,6 +149,8 @@ class ClosedLoopFit:
         truth = p.log.truth
         full = self.params
         ms = self.shooting
+        # the contact's nuisance parameters (freed unless stated): reported, not judged
+        nuisance = set(NUISANCE) if ms is not None and self.settings.free_contact else set()
         out: dict[str, Any] = {
             "mode": "closed-loop",
             "method": ("output error: GA (optim.ga improved, one batched kernel call per "
@@ -166,7 +171,8 @@ class ClosedLoopFit:
                             "unit": CHANNELS[c][2], "chosen_by": self.scale_notes[c]}
                         for j, c in enumerate(p.channels)},
             "dt_s": p.dt, "ga_dt_s": p.ga_dt,
-            "parameters": u.to_json(units),
+            "parameters": {n: {**v, "role": "nuisance" if n in nuisance else "primary"}
+                           for n, v in u.to_json(units).items()},
             "not_determined": [n for n, d in zip(self.names, u.determined, strict=True)
                                if not d],
             "correlation": {"names": list(self.names), "matrix": u.corr.tolist()},
@@ -183,6 +189,7 @@ class ClosedLoopFit:
                      "sum over channels and samples of ((measured - simulated)/scale)^2"},
             "fit_rms": self.fit_rms(),
             "fit_quality": self.fit_quality(),
+            "adequacy": self.adequacy,
             "all_parameters": full,
             "ga": None if ms is not None else {
                 "pop": self.settings.ga.pop, "generations": self.settings.ga.generations,
@@ -394,15 +401,24 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
                 f"the cost is not smooth at the scale of the standard error: moving "
                 f"{problem.names[j]} by 1 SE raises J {ratio:.3g} x what J^T J predicts (backlash "
                 "impacts make output-error costs rugged, docs/identification.md)")
-    if not np.all(unc.determined):
-        warnings.append("not determined: " + ", ".join(
-            n for n, d in zip(problem.names, unc.determined, strict=True) if not d)
-            + " (see identification.json, parameters.*.not_determined_because)")
+    # the contact's nuisance parameters are reported (identification.json), not judged
+    judged = [n for n in problem.names
+              if not (ms is not None and settings.free_contact and n in NUISANCE)]
+    undetermined = [n for n, d in zip(problem.names, unc.determined, strict=True)
+                    if not d and n in judged]
+    if undetermined:
+        warnings.append("not determined: " + ", ".join(undetermined)
+                        + " (see identification.json, parameters.*.not_determined_because)")
     Y = problem.predict(x[None])[0]
     timings["total_s"] = time.perf_counter() - t_start
     fit = ClosedLoopFit(settings, problem, x_first, cost_first, x, float(r @ r), r, J, unc, Y,
                         history, notes, grid, slc, prof, nfev, njev, status, restarted,
                         spans, stages, timings, throughput, warnings, smooth, ms)
+    fit.adequacy = judge_adequacy(problem, notes, ms, Y)
+    if fit.adequacy is not None and not fit.adequacy["adequate"]:
+        warnings.append("the model is NOT adequate for the log (its residuals are not white "
+                        "noise independent of the command): " + " | ".join(
+                            fit.adequacy["failures"]))
     ratios = fit.fit_quality()["rms_over_scale"]
     high = {c: v for c, v in ratios.items()
             if notes[c] == NOISE_NOTE and v > NOISE_LEVEL_RATIO}
@@ -422,6 +438,27 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
             + ": a local minimum (try other bounds, a larger ga.pop or another ga_horizon_s) "
             "or a model that cannot explain the log; the standard errors assume neither")
     return fit
+
+
+def judge_adequacy(problem: ClosedLoopProblem, notes: dict[str, str],
+                   ms: ShootingOutcome | None, whole: np.ndarray) -> dict[str, Any]:
+    """The adequacy of the fit (:func:`adequacy.adequacy`): the segments' prediction of a
+    multiple-shooting fit (the fit itself), else the whole log from rest ``whole``
+    [n_ch, n] (SI), against the logged command; the channels with an automatic scale judged;
+    the failing windows among the fit's segments (a tenth of the log without them)."""
+    from ema_cli.identify.closed_loop.adequacy import adequacy
+    from ema_cli.identify.closed_loop.shooting_quality import JUDGED_NOTES
+
+    n = problem.log.n
+    pred = whole
+    first = np.unique(np.linspace(0, n, 11).astype(int)[:-1])
+    if ms is not None and ms.segment_prediction is not None:
+        pred = ms.segment_prediction
+        if ms.fit_first is not None:
+            first = ms.fit_first
+    judged = tuple(c for c in problem.channels if notes[c] in JUDGED_NOTES)
+    return adequacy(problem.channels, problem.measured, pred, problem.log.theta_ref,
+                    problem.log.t, first, judged)
 
 
 def quadratic_check(problem: ClosedLoopProblem, x: np.ndarray, r: np.ndarray, J: np.ndarray,

@@ -49,6 +49,7 @@ from ema_cli.identify.closed_loop.shooting_lengthen import (
     Lengthening,
     continue_at,
     lengthen_both,
+    on_same_segments,
     split_for_covariance,
 )
 from ema_cli.identify.closed_loop.shooting_quality import (
@@ -90,6 +91,9 @@ class ShootingOutcome:
     """The first samples of the segments the fit is judged and drawn on: the clusters of the
     covariance (the estimate's segments, or their parts: split_for_covariance)."""
     fell_back: bool = False  # the longest segments did not fit: the estimate is the anchor's
+    agreement: dict[str, Any] | None = None
+    """The runner-up against the best on the same segments: their length [s] (0: the
+    search's), both parameter sets, the half-widths they were compared with (SI)."""
     segment_prediction: np.ndarray | None = None
     """The fit itself: every channel as the segments predict it, each segment simulated from
     its fitted start state, at the estimate [n_ch, n_samples] (SI)."""
@@ -126,6 +130,7 @@ class ShootingOutcome:
             "stage_iterations": self.stage_iterations,
             "runner_up_won_on_longer_segments": self.runner_up_won,
             "motor_angle_tie": self.tie,
+            "runner_up_agreement": self.agreement,
         }
 
 
@@ -226,6 +231,27 @@ def refine_split(lg: Lengthening, fine: float, dt_search: float, refine_iter: in
     return res, split, res.x - x_coarse, x_coarse, c_coarse
 
 
+def runner_agreement(names: tuple[str, ...], prim: list[int], hw: np.ndarray,
+                     best: ShootingSearch, runner: ShootingSearch | None
+                     ) -> tuple[int, float | None, dict[str, Any] | None]:
+    """Whether the runner-up agrees with the best -> (starts that agree: 1 or 2, the segment
+    length they were compared on [s], the record for identification.json). It agrees when,
+    carried through the same lengthening, it ends within the estimate's interval half-widths
+    ``hw`` (SI) of the best in the primary parameters ``prim``, both on the same segments:
+    the longest both kept (:func:`on_same_segments`; on other segments the two differ by the
+    free states' bias, not by optimum: the README's example compared the best on 1.6 s with
+    the runner-up on 0.8 s) and at the search's step."""
+    if runner is None:
+        return 1, None, None
+    length, xb, xr = on_same_segments(best, runner)
+    agree = 1 + int(bool(np.all(np.abs(xr[prim] - xb[prim]) <= hw[prim])))
+    return agree, length, {"segments_s": length,
+                           "best": dict(zip(names, map(float, xb), strict=True)),
+                           "runner_up": dict(zip(names, map(float, xr), strict=True)),
+                           "half_widths": dict(zip(names, map(float, hw), strict=True)),
+                           "judged": [names[j] for j in prim]}
+
+
 def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_starts: int,
                       segment_s: float, dt_search: float, seed: int, max_iter: int,
                       polish_iter: int, refine_iter: int = 15,
@@ -276,12 +302,9 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     high = too_high(ratios, notes)
     judged = [v for c, v in ratios.items() if notes[c] in JUDGED_NOTES]
     at_noise = bool(judged) and max(judged) <= AT_NOISE_RATIO
-    # the runner-up agrees when, carried through the same lengthening, it ends within the
-    # estimate's interval half-widths of the best one (both at the search's step)
     prim = [j for j, n in enumerate(problem.names) if n not in nuisance]
     hw = 0.5 * (unc_ms.ci_high - unc_ms.ci_low)
-    res.agree = 1 + int(x_runner is not None and
-                        bool(np.all(np.abs(x_runner[prim] - x_best_coarse[prim]) <= hw[prim])))
+    res.agree, compared_on, agreement = runner_agreement(problem.names, prim, hw, res, runner)
     if res.agree < 2 and x_runner is not None:
         # two optima the search cannot choose between: the intervals (printed with "not
         # determined") span both, each with the estimate's half-widths, not the best alone
@@ -292,7 +315,9 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
             return f"{r.lengths[-1]:g} s" if r.lengths else "the search's"
 
         versus = ("" if runner is None else f"; the estimate's cost is J = {cost_coarse:.6g} "
-                  f"on {seg(res)} segments, the runner-up's {runner.cost:.6g} on {seg(runner)}")
+                  f"on {seg(res)} segments, the runner-up's {runner.cost:.6g} on {seg(runner)}"
+                  + (f" (compared on {compared_on:g} s segments)" if compared_on
+                     else " (compared on the search's segments)"))
         reasons.append(f"no other of the {n_fin} starts that ran to the end came within the "
                        f"estimate's 95 % intervals{versus}: the search may have missed a "
                        "better optimum (try more starts)"
@@ -326,7 +351,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                           step_shift=shift, segment_shift=seg_shift,
                           stage_iterations=iters, runner_up_won=runner_won, tie=tie,
                           fell_back=fell_back, fit_first=res_cov.sp.seg.first.copy(),
-                          segment_prediction=seg_pred)
+                          segment_prediction=seg_pred, agreement=agreement)
     if polish_iter <= 0:
         out.polish = {"kept": False, "why": "no polish (polish: false)"}
         return out

@@ -19,7 +19,7 @@ from ema_cli.identify.closed_loop.shooting_seat import (
     fit_states,
     reconstruct,
     seg_costs,
-    start_states,
+    start_states,  # noqa: F401  (kept here: callers reach it as shooting_search.start_states)
     state_starts,
 )
 
@@ -204,6 +204,7 @@ class ShootingSearch:
     iterations            LM iterations of the best start
     history               the best cost after each iteration
     timings               seconds per stage
+    lengths, x_at         the lengths it was continued to, its parameters on each
     """
 
     sp: ShootingProblem
@@ -219,6 +220,9 @@ class ShootingSearch:
     timings: dict[str, float]
     lengths: list[float] = field(default_factory=list)  # segment lengths continued to [s]
     final_V: np.ndarray | None = None  # scaled unknowns of the finishing starts, best first
+    x_at: dict[float, np.ndarray] = field(default_factory=dict)
+    """The parameters on the search's segments (key 0.0) and after each kept lengthening
+    (key: the length [s]): two candidates are compared on the same segments."""
 
 
 def sobol_starts(lower: np.ndarray, upper: np.ndarray, n: int, seed: int) -> np.ndarray:
@@ -250,13 +254,15 @@ def search(problem: ClosedLoopProblem, *, n_starts: int, segment_s: float, dt: f
     (:data:`HALVING`), the survivors run to convergence."""
     import time
 
+    from ema_cli.identify.closed_loop.shooting_spread import lm_spread, start_states_spread
+
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     sp = build(problem, segment_s, 0.5 * (problem.lower + problem.upper), tie)
     X0 = sobol_starts(problem.lower, problem.upper, n_starts, seed)
     if report:
         report("segment states of every start", 0, 1)
-    V0 = start_states(sp, X0, dt)
+    V0 = start_states_spread(sp, X0, dt)  # the starts in groups on the executor
     st = new_state(sp, V0, dt)
     timings["start_states_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -276,7 +282,7 @@ def search(problem: ClosedLoopProblem, *, n_starts: int, segment_s: float, dt: f
                 report(f"joint fit, round {k + 1} of {len(rounds)} (J = {best:.6g})",
                        offset + it, max_iter)
 
-        lm_many(sp, st, dt, iters, progress=prog)
+        lm_spread(lm_many, sp, st, dt, iters, prog)
         used += iters
         if keep > 0.0 and k < len(rounds) - 1:
             n_keep = max(2, int(round(keep * alive.size)))

@@ -326,7 +326,9 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
     why_open = ("the record has no reference channel" if record.reference_m is None else
                 "the description has no discrete controller" if prm.get("ctrl") != 1.0 else "")
     if why_open:
-        return _run_inverse(settings, cfg, record, extras, why_open, t0)
+        from ema_cli.identify.plant.inverse import run_inverse
+
+        return run_inverse(settings, cfg, record, extras, why_open, t0)
     ts = prm["Ts"]
     if abs(record.h_s / ts - 1.0) > SAMPLE_TOL:
         raise EmaError(f"{record.source}: samples every {record.h_s:.6g} s but the described "
@@ -392,57 +394,6 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                     {"F": bF, "q": bq, "v": bv, "a": ba}, split, use, timings, kernel)
 
 
-def _run_inverse(settings: PlantSettings, cfg: Any, record: PlantRecord, extras: dict,
-                 why: str, t0: float) -> PlantFit:
-    """The inverse model alone (``plant.inverse``): every law by IDIM-LS with the two-part
-    verdict, the time split scored by the force prediction error."""
-    from ema_cli.identify.plant.inverse import inverse_fit, prediction_pct
-
-    if settings.free:
-        raise EmaError(f"free: {', '.join(settings.free)} need the closed loop ({why}); "
-                       "expected a reference channel and a discrete controller in the "
-                       "description")
-    rotary = cfg.axis == "rotary"
-    use = _mask(record, settings.window, BENCHMARK.first_sample)
-    sub = _sliced(record, use)
-    kin = filtered_kinematics(record.q_m, record.h_s, BENCHMARK)
-    laws: dict[str, LawFit] = {}
-    order = ["symmetric", "per-direction"] if settings.law == "auto" else [settings.law]
-    for law in order:
-        terms = LAW_TERMS[law]
-        est, fit, unc, ad, g, block, F_sub = inverse_fit(sub, terms, law, rotary)
-        a0 = int(np.flatnonzero(use)[0]) - BENCHMARK.first_sample
-        a0 = max(a0, 0)
-        F = np.full(record.n, np.nan)
-        F[a0:a0 + sub.n] = F_sub
-        laws[law] = LawFit(law, est, fit, unc, ad, g, block, F, record.q_m, kin.dq_m_s,
-                           kin.ddq_m_s2, np.zeros(len(terms), dtype=bool))
-    chosen, choice = _choose(settings.law, laws)
-    nan = float("nan")
-    errors = {f"IDIM-LS ({lw})": BenchmarkErrors(nan, nan, nan, lf.start.relative_error_pct)
-              for lw, lf in laws.items()}
-    split = None
-    if settings.split > 0:
-        idx = np.flatnonzero(use)
-        cut = idx[int(settings.split * idx.size)]
-        first = use & (np.arange(record.n) < cut)
-        held = use & (np.arange(record.n) >= cut)
-        est = idim_ls(_sliced(record, first), LAW_TERMS[chosen])
-        split = {"share": settings.split, "t_split_s": float(record.t_s[cut]),
-                 "estimate": dict(zip(est.names, map(float, est.theta), strict=True)),
-                 "errors": {f"IDIM-LS ({chosen}), force prediction": BenchmarkErrors(
-                     nan, nan, nan, prediction_pct(_sliced(record, held), LAW_TERMS[chosen],
-                                                   est.theta))},
-                 "held_out_samples": int(np.count_nonzero(held))}
-    baseline = laws["symmetric"].start if "symmetric" in laws else laws[chosen].start
-    return PlantFit(settings, record, extras, str(cfg.axis), None, 0, baseline, laws, chosen,
-                    choice, errors, {"F": laws[chosen].F, "q": record.q_m, "v": kin.dq_m_s,
-                                     "a": kin.ddq_m_s2},
-                    split, use, {"total": time.perf_counter() - t0},
-                    {"calls": 0, "lanes": 0, "kernel_s": 0.0, "load_s": 0.0},
-                    f"inverse model only ({why}: no closed loop to simulate)")
-
-
 def _on_bound(fit: oe.OutputErrorFit, free: Mapping[str, tuple[float, float]]) -> np.ndarray:
     """Which parameters ended within 0.1 % of the span of a bound (freed kernel parameters)."""
     out = np.zeros(len(fit.names), dtype=bool)
@@ -490,73 +441,3 @@ def _split(settings: PlantSettings, record: PlantRecord, use: np.ndarray, law: s
             "errors": {"output error": benchmark_errors_on(record, hidx, q, v, a, F),
                        "IDIM-LS": benchmark_errors_on(record, hidx, bq, bv, ba, bF)},
             "held_out_samples": int(hidx.size)}
-
-
-@dataclass
-class PlantValidation:
-    """A fitted model simulated against another record: the benchmark's errors and the RMS
-    position error [m] of the fit and of the IDIM-LS baseline, the controller check, the
-    simulated channels."""
-
-    record: PlantRecord
-    controller: ControllerCheck | None
-    errors: dict[str, BenchmarkErrors]
-    rms_position_m: dict[str, float]
-    sims: dict[str, dict[str, np.ndarray]]
-
-
-def validate(fit: PlantFit, data: str | Path, columns: Mapping[str, str] | None = None
-             ) -> PlantValidation:
-    """Simulate the fitted model and the IDIM-LS baseline against another record (the same
-    description, delay and column map unless ``columns``)."""
-    models = {"output error": fit.best.estimate,
-              "IDIM-LS": dict(zip(fit.baseline.names, map(float, fit.baseline.theta),
-                                  strict=True))}
-    if fit.controller is None:
-        models = {f"IDIM-LS ({fit.chosen})": fit.best.estimate}
-    return validate_models(fit.settings, fit.delay, models, data, columns,
-                           inverse=fit.controller is None)
-
-
-def validate_models(settings: PlantSettings, delay: int, models: Mapping[str, Mapping[str, float]],
-                    data: str | Path, columns: Mapping[str, str] | None = None,
-                    inverse: bool = False) -> PlantValidation:
-    """Simulate each model (name -> term -> value, SI) in the described closed loop against the
-    record ``data`` -> the benchmark's errors and the RMS position error of each; ``inverse``:
-    the inverse model's force prediction error only (no closed loop)."""
-    cfg, base, resolve, prm = _description(settings)
-    umax = prm.get("dc_umax", np.inf)
-    record, extras = read_plant_record(data, dict(columns if columns is not None
-                                                  else settings.columns),
-                                       gain=prm.get("amp_gain"),
-                                       saturation=umax if np.isfinite(umax) else None,
-                                       limit_force=(umax * prm.get("amp_gain", 1.0)
-                                                    if np.isfinite(umax) else None),
-                                       need_reference=not inverse)
-    if inverse:
-        from ema_cli.identify.plant.inverse import prediction_pct
-
-        nan = float("nan")
-        errs = {k: BenchmarkErrors(nan, nan, nan, prediction_pct(
-            record, tuple(m), np.array(list(m.values())))) for k, m in models.items()}
-        return PlantValidation(record, None, errs, dict.fromkeys(models, nan), {})
-    if record.reference_m is None:
-        raise EmaError(f"{record.source}: no reference channel; expected the closed loop's "
-                       "reference position (--columns reference=NAME[:UNIT])")
-    if abs(record.h_s / prm["Ts"] - 1.0) > SAMPLE_TOL:
-        raise EmaError(f"{record.source}: samples every {record.h_s:.6g} s but the described "
-                       f"controller samples every {prm['Ts']:.6g} s")
-    first = BENCHMARK.first_sample
-    check = check_controller(prm, record.q_m, record.reference_m, extras["actuation"],
-                             extras["unit"], extras.get("disturbance"), first=first)
-    chosen_delay(check, delay, record.source)
-    idx = np.arange(first, record.n)
-    out, rms, sims = {}, {}, {}
-    for name, est in models.items():
-        terms = tuple(est)
-        plant = _plant(settings, base, resolve, prm, record, extras, delay, terms)
-        F, q, v, a = _kinematics(plant, np.array([est[t] for t in terms]), prm)
-        out[name] = benchmark_errors_on(record, idx, q, v, a, F)
-        rms[name] = float(np.sqrt(np.mean((q[idx] - record.q_m[idx]) ** 2)))
-        sims[name] = {"F": F, "q": q, "v": v, "a": a}
-    return PlantValidation(record, check, out, rms, sims)

@@ -11,10 +11,15 @@ held-out part of a time split and on another record.
 
 from __future__ import annotations
 
+import time
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
+from ema_cli.errors import EmaError
 from ema_cli.identify.plant import adequacy as adq
 from ema_cli.identify.plant import output_error as oe
+from ema_cli.identify.plant.benchmark import BenchmarkErrors
 from ema_cli.identify.plant.idim import (
     BENCHMARK,
     IdimEstimate,
@@ -23,6 +28,10 @@ from ema_cli.identify.plant.idim import (
     idim_ls,
 )
 from ema_cli.identify.plant.records import PlantRecord
+from ema_cli.identify.plant.settings import PlantSettings
+
+if TYPE_CHECKING:
+    from ema_cli.identify.plant.fit import PlantFit
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
 
 BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
@@ -96,3 +105,61 @@ def prediction_pct(record: PlantRecord, terms: tuple[str, ...], theta: np.ndarra
     reg = build_regression(record, terms, BENCHMARK)
     y_hat = reg.W @ theta
     return float(100.0 * np.linalg.norm(reg.y - y_hat) / np.linalg.norm(reg.y))
+
+
+def run_inverse(settings: PlantSettings, cfg: Any, record: PlantRecord, extras: dict,
+                why: str, t0: float) -> PlantFit:
+    """The inverse model alone (``plant.inverse``): every law by IDIM-LS with the two-part
+    verdict, the time split scored by the force prediction error."""
+    from ema_cli.identify.plant.fit import (
+        LAW_TERMS,
+        LawFit,
+        PlantFit,
+        _choose,
+        _mask,
+        _sliced,
+    )
+
+    if settings.free:
+        raise EmaError(f"free: {', '.join(settings.free)} need the closed loop ({why}); "
+                       "expected a reference channel and a discrete controller in the "
+                       "description")
+    rotary = cfg.axis == "rotary"
+    use = _mask(record, settings.window, BENCHMARK.first_sample)
+    sub = _sliced(record, use)
+    kin = filtered_kinematics(record.q_m, record.h_s, BENCHMARK)
+    laws: dict[str, LawFit] = {}
+    order = ["symmetric", "per-direction"] if settings.law == "auto" else [settings.law]
+    for law in order:
+        terms = LAW_TERMS[law]
+        est, fit, unc, ad, g, block, F_sub = inverse_fit(sub, terms, law, rotary)
+        a0 = int(np.flatnonzero(use)[0]) - BENCHMARK.first_sample
+        a0 = max(a0, 0)
+        F = np.full(record.n, np.nan)
+        F[a0:a0 + sub.n] = F_sub
+        laws[law] = LawFit(law, est, fit, unc, ad, g, block, F, record.q_m, kin.dq_m_s,
+                           kin.ddq_m_s2, np.zeros(len(terms), dtype=bool))
+    chosen, choice = _choose(settings.law, laws)
+    nan = float("nan")
+    errors = {f"IDIM-LS ({lw})": BenchmarkErrors(nan, nan, nan, lf.start.relative_error_pct)
+              for lw, lf in laws.items()}
+    split = None
+    if settings.split > 0:
+        idx = np.flatnonzero(use)
+        cut = idx[int(settings.split * idx.size)]
+        first = use & (np.arange(record.n) < cut)
+        held = use & (np.arange(record.n) >= cut)
+        est = idim_ls(_sliced(record, first), LAW_TERMS[chosen])
+        split = {"share": settings.split, "t_split_s": float(record.t_s[cut]),
+                 "estimate": dict(zip(est.names, map(float, est.theta), strict=True)),
+                 "errors": {f"IDIM-LS ({chosen}), force prediction": BenchmarkErrors(
+                     nan, nan, nan, prediction_pct(_sliced(record, held), LAW_TERMS[chosen],
+                                                   est.theta))},
+                 "held_out_samples": int(np.count_nonzero(held))}
+    baseline = laws["symmetric"].start if "symmetric" in laws else laws[chosen].start
+    return PlantFit(settings, record, extras, str(cfg.axis), None, 0, baseline, laws, chosen,
+                    choice, errors, {"F": laws[chosen].F, "q": record.q_m, "v": kin.dq_m_s,
+                                     "a": kin.ddq_m_s2},
+                    split, use, {"total": time.perf_counter() - t0},
+                    {"calls": 0, "lanes": 0, "kernel_s": 0.0, "load_s": 0.0},
+                    f"inverse model only ({why}: no closed loop to simulate)")

@@ -314,6 +314,9 @@ def read_plant_record(path: str | Path, columns: dict[str, str] | None = None,
     rec = PlantRecord(t - t[0], q, g * u, h, source,
                       {**names, "force": f"gain*{names['actuation']}"},
                       one_based=one_based, reference_m=ref, constants=constants)
+    mapped = {n for r, n in names.items() if r in vals or r == "gain"}
+    unused = sorted(k for k in table.raw if k not in mapped and k not in EMPS_CONSTANTS
+                    and not k.startswith("__"))
     extras = {"actuation": u, "unit": unit_a, "gain": g, "gain_from": g_from,
-              "disturbance": vals.get("disturbance")}
+              "disturbance": vals.get("disturbance"), "unused": unused}
     return rec, extras
