@@ -16,6 +16,7 @@ Below the computing layers (imports only ``units``): ``cli/``, ``report/`` and `
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from ema_cli.units import fmt_num
 
@@ -69,6 +70,13 @@ def quantity(value: float, unit: str = "", *, metric: str = "", measured: bool =
             and (note is None or word in note)):
         return f"{word} ({text})"
     return text
+
+
+def verdict_text(v: Any) -> str:
+    """A verdict row's value (``acceptance.verdict.Verdict``: value, unit, metric, measured,
+    lower, upper, note) in the words of :func:`quantity`."""
+    return quantity(v.value, v.unit, metric=v.metric, measured=v.measured, lower=v.lower,
+                    upper=v.upper, note=v.note)
 
 
 def margin_text(value: float, metric: str) -> str:

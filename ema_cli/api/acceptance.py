@@ -60,6 +60,13 @@ class AcceptanceResult:
         """The rows that FAIL."""
         return [v for v in self.verdicts if v.result == "FAIL"]
 
+    def failed_limits(self) -> list[str]:
+        """The rows that FAIL as lines: ``test: metric (condition) value`` (the value in the
+        one vocabulary, ``ema_cli.vocab``)."""
+        from ema_cli.vocab import verdict_text
+
+        return [f"{v.test}: {v.metric} ({v.condition}) {verdict_text(v)}" for v in self.failed]
+
     @property
     def inconclusive(self) -> list[Verdict]:
         """The rows that are INCONCLUSIVE (not measured inside the test's range)."""

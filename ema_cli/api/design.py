@@ -156,8 +156,7 @@ class DesignResult:
                 "cases": [{"case": c.name, "parameters": c.values, "sides": c.sides,
                            "passed": c.passed, "verdict": c.verdict,
                            "tests": c.test_verdicts(), "test_results": c.test_results(),
-                           "failed_limits": [f"{v.test}: {v.metric} ({v.condition}) "
-                                             f"{_shown(v)}" for v in c.result.failed],
+                           "failed_limits": c.result.failed_limits(),
                            "folder": f"acceptance/{c.name}"} for c in self.cases]},
             "notes": self.notes,
             "overrides": [[k, v] for k, v in self.overrides],
@@ -182,14 +181,6 @@ class DesignResult:
         inputs = self.inputs or run_inputs(self.config, sets=self.overrides,
                                            files={"log": self.log})
         return write_run("design", self.config.name, inputs, folder_arg(folder), write)
-
-
-def _shown(v: Any) -> str:
-    """A verdict's value in the one vocabulary (``ema_cli.vocab``)."""
-    from ema_cli.vocab import quantity
-
-    return quantity(v.value, v.unit, metric=v.metric, measured=v.measured, lower=v.lower,
-                    upper=v.upper, note=v.note)
 
 
 def design_verdict(inconclusive: list[str], cases: list[bool | str]) -> str:

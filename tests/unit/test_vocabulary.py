@@ -32,10 +32,10 @@ NOT_MEASURED = _verdict("rise_time", "s", math.nan, False, math.nan, math.nan,
 def _every_command(v: Verdict) -> dict[str, str]:
     """The text each command prints for verdict ``v``."""
     from ema_cli.api.acceptance import AcceptanceResult
-    from ema_cli.api.design import _shown
     from ema_cli.cli.acceptance import _value
     from ema_cli.report.acceptance_report import fmt_measured
     from ema_cli.report.yield_report import measured_cells
+    from ema_cli.vocab import verdict_text as _shown
 
     res = AcceptanceResult.__new__(AcceptanceResult)
     res.verdicts = [v]
@@ -43,7 +43,8 @@ def _every_command(v: Verdict) -> dict[str, str]:
                             "l lower": [v.lower] * 3})
     return {"acceptance console": _value(v, None),
             "acceptance.md (unit in its own column)": fmt_measured(v, with_unit=False),
-            "design.json/design.md": _shown(v),
+            "design.json/design.md": res.failed_limits()[0].split(") ", 1)[1]
+            if v.result == "FAIL" else _shown(v),
             "API to_pandas reads": res.to_pandas()["reads"].iloc[0],
             "yield.md median": measured_cells(samples, "l", v.unit, v.metric)[0]}
 
