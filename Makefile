@@ -31,7 +31,9 @@ $(BIN)/python:
 $(STAMP): pyproject.toml $(LOCKS)/run.lock $(LOCKS)/build.lock | $(BIN)/python
 	$(PIPI) -r $(LOCKS)/build.lock
 	$(PIPI) -r $(LOCKS)/run.lock
-	$(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
+	@# setuptools' lenient editable mode always prints an information banner: not for users
+	PYTHONWARNINGS="ignore:Editable installation" \
+	  $(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
 	@rm -f $(TSTAMP)
 	@touch $@
 

@@ -95,10 +95,8 @@ def njit(*args: Any, **kwargs: Any) -> Any:
 config.CACHE_DIR = str(_prepare(cache_root(), CACHE_KEY))
 
 if "NUMBA_DISABLE_PERFORMANCE_WARNINGS" not in os.environ:
-    # the per-chunk kernels are compiled with parallel=True but have no prange, on purpose
-    # (numba's parallel pipeline optimises them better, see sim/kernel.py); numba's "no
-    # transformation for parallel execution" advice is expected. Set the variable yourself to see
-    # numba's performance warnings again.
+    # numba's performance advice (e.g. "no transformation for parallel execution") is not for
+    # users; set the variable yourself to see numba's performance warnings again.
     config.DISABLE_PERFORMANCE_WARNINGS = 1
 
 

@@ -16,6 +16,17 @@ from typing import Any
 RESULTS_ROOT = Path("results")
 
 
+def shown(path: str | Path) -> str:
+    """A path as output shows it: relative to the working folder when inside it (no ``../``),
+    else its last two parts (``configs/deadzone1.yaml``): never the machine's absolute path."""
+    p = Path(path)
+    full = p.resolve()
+    try:
+        return full.relative_to(Path.cwd().resolve()).as_posix() or "."
+    except ValueError:
+        return Path(*full.parts[-2:]).as_posix() if len(full.parts) > 2 else full.name
+
+
 def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
     """Write ``path`` through ``write(tmp)``, ``tmp`` a fresh temporary sibling that ``write``
     creates (:class:`AtomicFile`), then rename it into place; on any error nothing is left."""

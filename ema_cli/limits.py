@@ -31,6 +31,18 @@ def check_steps(total: float, what: str, reduce: str) -> None:
                        f"the cap of {MAX_CASE_STEPS:.0e}; {reduce}")
 
 
+def estimate(total: float, what: str, workers: int | None = None) -> float:
+    """Announce (and record for the manifest) the estimated time of ``total`` case-steps on
+    ``workers`` cores (default: all this process may use) from the cost model the cap uses
+    (``progress.CPU_S_PER_STEP``): ``estimated time ~3 min: what``, when above
+    ``progress.ESTIMATE_MIN_S`` -> the estimate [s]."""
+    from ema_cli.progress import announce_estimate, kernel_seconds
+
+    seconds = kernel_seconds(total, 1, cores() if workers is None else workers)
+    announce_estimate(seconds, what)
+    return seconds
+
+
 def cores() -> int:
     """Cores this process may use."""
     try:

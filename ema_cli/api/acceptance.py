@@ -60,6 +60,13 @@ class AcceptanceResult:
         """The rows that FAIL."""
         return [v for v in self.verdicts if v.result == "FAIL"]
 
+    def failed_limits(self) -> list[str]:
+        """The rows that FAIL as lines: ``test: metric (condition) value`` (the value in the
+        one vocabulary, ``ema_cli.vocab``)."""
+        from ema_cli.vocab import verdict_text
+
+        return [f"{v.test}: {v.metric} ({v.condition}) {verdict_text(v)}" for v in self.failed]
+
     @property
     def inconclusive(self) -> list[Verdict]:
         """The rows that are INCONCLUSIVE (not measured inside the test's range)."""
@@ -78,15 +85,23 @@ class AcceptanceResult:
         """The verdict table: test, kind, metric, condition, value, min, max, unit, result
         (PASS, FAIL or INCONCLUSIVE), measured (inside the test's range), lower, upper (the
         bound when not measured, in ``unit``), value_si, si_unit, note, reason (why
-        INCONCLUSIVE, naming the setting to change) (``wide``), or ``long`` (test, metric,
+        INCONCLUSIVE, naming the setting to change), reads (the value as the commands print it:
+        ``ema_cli.vocab.quantity``) (``wide``), or ``long`` (test, metric,
         condition, quantity, value)."""
         import dataclasses
 
         import pandas as pd
 
+        from ema_cli.vocab import quantity
+
         df = pd.DataFrame([dataclasses.asdict(v) for v in self.verdicts])
         if len(df):
             df.insert(df.columns.get_loc("result") + 1, "passed", df["result"] == "PASS")
+            # the value as every command prints it (ema_cli.vocab): "no phase crossover
+            # (> 109.4 dB)", "not measured"
+            df["reads"] = [quantity(v.value, v.unit, metric=v.metric, measured=v.measured,
+                                    lower=v.lower, upper=v.upper, note=v.note)
+                           for v in self.verdicts]
         if form == "wide":
             return df
         if form != "long":
@@ -105,7 +120,7 @@ class AcceptanceResult:
         from ema_cli.report.acceptance_report import test_figure
 
         run = self.run(test) if test is not None else self.runs[0]
-        return test_figure(run, self.spec.tests[run.name], self.title)
+        return test_figure(run, self.spec.tests[run.name], self.title, self.verdicts)
 
     def save(self, folder: str | Path | None = None) -> Path:
         """Write acceptance.md, acceptance.csv, one figure per test, the spec and a manifest."""
@@ -176,6 +191,10 @@ def acceptance(spec: ConfigSource, overrides: Overrides = None, *,
     from ema_cli.acceptance.setup import test_setups
 
     (params, _), setups = test_setups(sp, names, base_dir(spec))
+    from ema_cli.limits import estimate
+
+    work = sum(sp.tests[n].sim_seconds() / setups[n][1] for n in names)
+    estimate(work, f"{len(names)} test(s), {work:,.0f} integration steps (--only runs fewer)")
     t0 = time.perf_counter()
     runs = []
     rows = []

@@ -158,8 +158,7 @@ class DesignResult:
                 "cases": [{"case": c.name, "parameters": c.values, "sides": c.sides,
                            "passed": c.passed, "verdict": c.verdict,
                            "tests": c.test_verdicts(), "test_results": c.test_results(),
-                           "failed_limits": [f"{v.test}: {v.metric} ({v.condition}) "
-                                             f"{v.value:.4g} {v.unit}" for v in c.result.failed],
+                           "failed_limits": c.result.failed_limits(),
                            "folder": f"acceptance/{c.name}"} for c in self.cases]},
             "notes": self.notes,
             "overrides": [[k, v] for k, v in self.overrides],

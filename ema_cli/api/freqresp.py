@@ -222,13 +222,18 @@ def freqresp(config: ConfigSource = None, overrides: Overrides = None, *,
     params = resolve_run(cfg, base_dir(config)).params
     f = np.geomspace(f_min_hz, f_max_hz, n)
     dt = cfg.simulation.dt_s
-    check_steps(sinestream_steps(f, dt, len(amps)),
+    steps = sinestream_steps(f, dt, len(amps))
+    check_steps(steps,
                 f"frequency response from {f_min_hz:g} Hz at dt_s = {dt:g} s ({len(amps)} "
                 f"amplitudes x {n} frequencies)",
                 f"raise f_min_hz (a frequency measures a whole period after {SETTLE_S:g} s, "
                 "and settles 3 periods and measures 4 when its response is still changing), "
                 "or use "
                 "fewer frequencies or amplitudes, or a larger simulation.dt_s")
+    from ema_cli.limits import estimate
+
+    estimate(steps, f"{len(amps)} amplitude(s) x {n} frequencies, {steps:,.0f} integration "
+             "steps (a lower --f-min costs most)")
     t0 = time.perf_counter()
     points = sinestream(params, amps, f, dt=cfg.simulation.dt_s)
     wall = time.perf_counter() - t0

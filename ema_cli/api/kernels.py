@@ -42,7 +42,7 @@ def compile_unit(name: str, quiet: bool = False) -> float:
     from ema_cli.sim.runner import load_kernel
 
     base, v = name.split("/")
-    load_kernel(base.endswith("parallel"), 16 if base.startswith("lanes") else 1, int(v[1:]))
+    load_kernel(16 if base == "lanes" else 1, int(v[1:]))
     return time.perf_counter() - t0
 
 

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from ema_cli.api._inputs import Overrides, folder_arg, override_pairs
 from ema_cli.errors import EmaError
+from ema_cli.files import shown
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -87,7 +88,7 @@ def run_threshold_tuning(path: Path, tid: str, rel: str, log: Any = print
     if not cpath.is_file():
         raise EmaError(f"{path}: threshold '{tid}': tuning '{rel}' is not a file")
     cfg = load_config(cpath, [], TuneConfig)
-    log(f"tuning for threshold {tid}: {cpath} ({cfg.optimiser.method}, budget "
+    log(f"tuning for threshold {tid}: {shown(cpath)} ({cfg.optimiser.method}, budget "
         f"{cfg.optimiser.budget})")
     scenarios, _ = build_scenarios(cfg, cpath.parent)
     o = run_tuning(cfg, scenarios)
@@ -145,7 +146,7 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
     t0 = time.perf_counter()
     for s in rep.exp.studies:
         cfg, cpath = study_config(path, s.config)
-        log(f"study {s.id}: {cpath}")
+        log(f"study {s.id}: {shown(cpath)}")
         res = run_sweep(cfg, under(out, "studies", s.id), n_jobs=n_jobs, progress=progress,
                         cache_dir=default_cache_dir(out),  # one cache for every study
                         base_dir=cpath.parent, source=str(cpath),
@@ -164,7 +165,7 @@ def run_experiment(path: Path, out: Path, n_jobs: int | None = None,
         t0 = time.perf_counter()
         spec = rep.exp.sensitivity
         cfg, cpath = sensitivity_config(path, spec)
-        log(f"sensitivity: {cpath} ({spec.method}, n = {spec.n})")
+        log(f"sensitivity: {shown(cpath)} ({spec.method}, n = {spec.n})")
         rep.sensitivity = run_sensitivity(
             cfg, under(out, "sensitivity"), spec.method, spec.n, n_jobs=n_jobs,
             progress=progress, cache_dir=default_cache_dir(out), base_dir=cpath.parent,

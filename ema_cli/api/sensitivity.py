@@ -54,6 +54,22 @@ class Sensitivity:
         """convergence.csv: the indices on nested prefixes of the design (column ``n``)."""
         return self.result.convergence
 
+    def ranking_text(self, input: str | None = None, metric: str | None = None,
+                     top: int = 3) -> str:
+        """The ``top`` factors of one input and metric with their index and its 95 %
+        half-width, as the console prints them (``Kpp 0.41 ± 0.12, ...``)."""
+        from ema_cli.sensitivity.analyze import index_text
+
+        t = self.ranked(input, metric)
+        return ", ".join(index_text(row, self.result.method) for _, row in t.head(top).iterrows())
+
+    def imprecise(self, input: str | None = None, metric: str | None = None) -> list[str]:
+        """The factors of one input and metric whose index is too imprecise to rank (its
+        half-width over a fifth of it, or ST outside [0, 1]): ``sensitivity.analyze.imprecise``."""
+        from ema_cli.sensitivity.analyze import imprecise
+
+        return imprecise(self.ranked(input, metric), self.result.method)
+
     def ranked(self, input: str | None = None, metric: str | None = None) -> pd.DataFrame:
         """The indices of one input and metric (default: the first of each), most influential
         factor first (by ST, or mu* for Morris)."""
@@ -189,7 +205,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
                 force: bool = False, progress: bool = False,
                 cache_dir: str | Path | None = None, out: str | Path | None = None,
                 write: bool = False, scheduler: str | None = None,
-                log: Callable[[str], None] | None = None) -> Sensitivity:
+                log: Callable[[str], None] | None = None,
+                on_progress: Callable[[str, int | None, int | None], None] | None = None
+                ) -> Sensitivity:
     """Run a sensitivity study config (factors, metrics, inputs), as ``ema sensitivity CONFIG
     --method --n --set ...`` does. By default nothing is written (``.save()`` writes the
     folder); ``write`` True (or ``out`` given): the command's folder is written as the study
@@ -200,7 +218,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     n        Sobol base samples (a power of two) or Morris trajectories (default: the config's)
     cache_dir  a job cache to use (finished samples are reused by later calls); without it
              nothing is written to disk
-    log      ``log(text)``: one line per input as it starts
+    log      ``log(text)``: one line per input as it starts, and the size and time estimate
+    on_progress  ``on_progress(stage, done, total)``: the stages and steps the command line
+             shows (``ema_cli.progress.StageHook``), e.g. ("simulations", 4096, 98304)
     n_jobs, backend, scheduler, force, progress   as ``api.sweep``
     """
     from ema_cli.api._inputs import capped_jobs, check_sensitivity_steps, choice_arg, number_arg
@@ -209,6 +229,9 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     from ema_cli.config.sensitivity import SensitivityConfig
 
     _parallel_args(n_jobs, backend, force, progress, cache_dir)
+    from ema_cli.api._inputs import callable_arg
+
+    callable_arg(on_progress, "on_progress")
     choice_arg(method, "method", ("sobol", "morris"))
     number_arg(n, "n", low=1, integer=True)
     pairs = override_pairs(overrides)
@@ -218,9 +241,12 @@ def sensitivity(config: ConfigSource, overrides: Overrides = None, *, method: st
     check_command(cfg, "sensitivity")
     check_sensitivity_steps(cfg, method, n, source_name(config))
     n_jobs = capped_jobs(n_jobs, cfg, backend)
-    res = run_sensitivity(cfg, folder_arg(out), method, n, n_jobs=n_jobs, backend=backend,
-                          scheduler=scheduler, force=force, progress=progress,
-                          cache_dir=Path(cache_dir) if cache_dir is not None else None,
-                          base_dir=base_dir(config), source=source_name(config),
-                          overrides=pairs, write=write or out is not None, log=log)
+    from ema_cli.progress import hooked
+
+    with hooked(on_progress, log):
+        res = run_sensitivity(cfg, folder_arg(out), method, n, n_jobs=n_jobs, backend=backend,
+                              scheduler=scheduler, force=force, progress=progress,
+                              cache_dir=Path(cache_dir) if cache_dir is not None else None,
+                              base_dir=base_dir(config), source=source_name(config),
+                              overrides=pairs, write=write or out is not None, log=log)
     return Sensitivity(res, pairs)

@@ -241,18 +241,21 @@ def simulate(
     t0 = time.perf_counter()
     cfg, pairs = _resolve(config, overrides, nl, step_deg, duration_s, dt_s)
     run = resolve_run(cfg, base_dir(config))
+    from ema_cli.config.loader import check_input_start
+
+    check_input_start(run.signal, run.duration)
     n_steps, dec = plan_steps(run.duration, run.dt, run.output_interval)
+    from ema_cli.limits import estimate
+
+    estimate(n_steps, f"one run of {n_steps:,} steps", workers=1)
     timings = {"config": time.perf_counter() - t0}
     res = simulate_batch(np.array([to_row(run.params)]), [run.signal], None, run.dt, n_steps,
                          dec)
     timings["kernel_load"] = res.load_s
     timings["simulation"] = res.kernel_s
     timings["total"] = time.perf_counter() - t0
-    from ema_cli.config.loader import inert_input_warnings
-
     return Simulation(cfg, run.params, run.signal, res, pairs, timings,
-                      resolution_warnings(run.params, run.dt)
-                      + inert_input_warnings(run.signal, run.duration))
+                      resolution_warnings(run.params, run.dt))
 
 
 def _resolve(config: ConfigSource, overrides: Overrides, nl: Mapping[str, Any] | None,

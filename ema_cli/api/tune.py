@@ -414,7 +414,7 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
         n_runs = runs or o.runs
         import os
 
-        from ema_cli.progress import BIG_RUN, estimate
+        from ema_cli.progress import BIG_RUN, announce_estimate, kernel_seconds
         from ema_cli.tune.run import evaluations_for
 
         m, b = method or o.method, budget or o.budget
@@ -422,10 +422,12 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
             + (f"; x {n_runs} runs" if n_runs > 1 else ""))
         n_sims = n_runs * evaluations_for(m, b, o.pop, len(cfg.variables), o.polish,
                                           o.local) * len(scenarios)
-        if n_sims > BIG_RUN:
-            sim = cfg.simulation
-            log(estimate(n_sims, round(sim.duration_s / sim.dt_s), os.cpu_count() or 1)
-                + f" ({len(scenarios)} scenarios per evaluation; --budget, --runs set it)")
+        sim = cfg.simulation
+        steps, workers = round(sim.duration_s / sim.dt_s), os.cpu_count() or 1
+        announce_estimate(kernel_seconds(n_sims, steps, workers),
+                          f"{n_sims:,} simulations of {steps:,} steps on {workers} cores "
+                          f"({len(scenarios)} scenarios per evaluation; --budget, --runs set "
+                          "it)", force=n_sims > BIG_RUN)
     from ema_cli.sweep.executor import executing
 
     with executing(backend, n_jobs, scheduler) as ex:

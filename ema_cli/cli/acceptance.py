@@ -19,8 +19,6 @@ from ema_cli.cli.common import (
 )
 from ema_cli.progress import report as report_stage
 
-NO_CROSSOVER = {"gain_margin": "no phase crossover", "phase_margin": "no gain crossover"}
-"""What an infinite margin means."""
 MARKS = {"PASS": "[green]PASS[/]", "FAIL": "[bold red]FAIL[/]",
          "INCONCLUSIVE": "[bold yellow]INCONCLUSIVE[/]"}
 """The console's mark of each result (each row style distinct)."""
@@ -30,19 +28,9 @@ MARK_WIDTH = len("INCONCLUSIVE")
 def _value(v: object, fmt_value: Callable) -> str:
     """A verdict's value with its unit: measured, the bound it is known by ("> 2 Hz"), or in
     words (an infinite margin)."""
-    import math
-
     from ema_cli.report.acceptance_report import fmt_measured
 
-    value = v.value  # type: ignore[attr-defined]
-    if (v.measured and isinstance(value, float) and math.isinf(value)  # type: ignore[attr-defined]
-            and v.metric in NO_CROSSOVER):  # type: ignore[attr-defined]
-        return NO_CROSSOVER[v.metric]  # type: ignore[attr-defined]
-    text = f"{fmt_measured(v)} {v.unit}"  # type: ignore[attr-defined]
-    word = NO_CROSSOVER.get(v.metric, "")  # type: ignore[attr-defined]
-    if word and word in v.note:  # type: ignore[attr-defined]
-        return f"{word}, {text}"
-    return text
+    return fmt_measured(v, with_unit=True)
 
 
 def _mark(v: object) -> str:

@@ -91,7 +91,10 @@ def _table(title: str, params: dict[str, dict], truth: dict[str, float] | None) 
             row += ["unknown" if t is None else fmt_num(t, u, 6),
                     "unknown" if not t else f"{100 * (v['value'] / t - 1):+.3g} %"]
         rows.append(row)
-    print_table(title, cols, rows, optional=("95 % interval",), where="identification.json")
+    # at 80 columns the estimate and its 95 % interval stay (what an identification is for):
+    # the standard error goes first (the interval says more), then the truth columns
+    optional = ("truth", "error", "SE") if truth else ("SE",)
+    print_table(title, cols, rows, optional=optional, where="identification.json")
 
 
 def run_log_mode(modes: list[str], *, config: Path | None, data: Path | None,

@@ -99,12 +99,35 @@ GROUPS = {
 }
 """(subcommands, help) of each command that is a group (cli/groups.py)."""
 
+SHORT_HELP = {
+    "simulate": "Simulate one configuration: signals, metrics, a figure.",
+    "sweep": "Run every job of a sweep config, in parallel, cached.",
+    "validate": "Check a config against its schema (nothing is run).",
+    "show": "Print the resolved config, every default filled in.",
+    "threshold": "Find the magnitude at which a metric crosses a limit.",
+    "margins": "Gain and phase margins of the position and speed loops.",
+    "freqresp": "Frequency response of the load angle by simulation.",
+    "acceptance": "Run an acceptance battery: PASS, FAIL or INCONCLUSIVE.",
+    "yield": "Production yield over toleranced units, with its interval.",
+    "tune": "Tune the controller's free variables to the scenarios.",
+    "sensitivity": "Global sensitivity of metrics to factors (Sobol, Morris).",
+    "identify": "Identify the actuator from torque data, a log or a record.",
+    "design": "From a log to a controller signed off against a spec.",
+    "reproduce": "Reproduce the paper: studies, thresholds, claims.",
+    "locations": "The nine nonlinearity locations of the paper.",
+    "params": "The model parameter table (SI units).",
+    "compile": "Compile every kernel into the cache (first run only).",
+}
+"""Each command's one-line summary in ``ema --help``: whole at 80 columns (the docstring's
+first sentence, cut by the help formatter, is not)."""
+
 for _name, _fn in COMMANDS:
     if _name in GROUPS:
         _subs, _help = GROUPS[_name]
-        app.add_typer(command_group(_name, _fn, _subs, _help), name=_name)
+        app.add_typer(command_group(_name, _fn, _subs, _help), name=_name,
+                      short_help=SHORT_HELP[_name])
     else:
-        app.command(_name)(_fn)
+        app.command(_name, short_help=SHORT_HELP[_name])(_fn)
 
 
 FAST_EXIT = frozenset({"simulate", "validate", "show", "threshold", "margins", "freqresp",

@@ -15,11 +15,11 @@ from ema_cli.units import fmt_num
 def margins_cells(m: object) -> tuple[str, str, str, str]:
     """Gain margin, its frequency, phase margin, its frequency, with units, or in words when
     the loop never crosses -180 deg (no phase crossover) or 0 dB (no gain crossover)."""
+    from ema_cli.vocab import margin_text
+
     gm, fg, pm, fp = (getattr(m, k) for k in ("gm_db", "f_gm_hz", "pm_deg", "f_pm_hz"))
-    return (fmt_num(gm, "dB", inf="no phase crossover", nan="no phase crossover"),
-            fmt_num(fg, "Hz", nan="-", inf="-"),
-            fmt_num(pm, "deg", inf="no gain crossover", nan="no gain crossover"),
-            fmt_num(fp, "Hz", nan="-", inf="-"))
+    return (margin_text(gm, "gain_margin"), fmt_num(fg, "Hz", nan="-", inf="-"),
+            margin_text(pm, "phase_margin"), fmt_num(fp, "Hz", nan="-", inf="-"))
 
 
 @handle_errors

@@ -111,7 +111,7 @@ def yield_cmd(
 
     report("writing files and figures")
     folder = res.save()
-    from ema_cli.report.yield_report import headline
+    from ema_cli.report.yield_report import console_lines, headline
 
     console.print(f"[bold]{res.title}[/]")
     console.print(headline(res), highlight=False)
@@ -121,7 +121,10 @@ def yield_cmd(
             console.print(f"  {name}: {100 * r.value:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] "
                           f"({r.n_fail} fail, {r.n_inconclusive} inconclusive)",
                           highlight=False)
-    console.print(f"-> {folder}", highlight=False)
+    for line in console_lines(res):
+        console.print(line, highlight=False)
+    console.print(f"-> {folder} (yield.md: per limit, drivers, the worst case)",
+                  highlight=False)
     if min_yield is not None:
         lo, hi = res.overall.interval
         word = min_yield_verdict(lo, hi, min_yield)

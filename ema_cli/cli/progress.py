@@ -2,11 +2,16 @@
 
 On a terminal, one line redrawn in place (at most 10 times a second): the command, the stage,
 ``k/n`` and the elapsed time; it is erased when the command ends. In a pipe or a CI log, one
-line per stage as it starts (``identify: GA generation (200) ...``), nothing more.
+line per stage as it starts (``identify: GA generation (200) ...``) and, once a stage has run
+:data:`LONG_S`, at most one more per tenth of it (``identify: GA generation 100/200 (50 %)``).
+A stage is the words of its text before the first number, parenthesis or colon
+(:func:`stage_key`): ``joint fit, round 2 of 3 (J = 0.01)`` is stage ``joint fit, round`` at
+2/3, so a stage reported again with other numbers does not print again.
 """
 
 from __future__ import annotations
 
+import re
 import sys
 import time
 from typing import Any, TextIO
@@ -14,6 +19,28 @@ from typing import Any, TextIO
 REFRESH_S = 0.1  # shortest interval between two redraws of the terminal line [s]
 GRACE_S = 1.0  # a pipe hears of no stage before the command has run this long [s]: a command
 # that ends at once (a bad option, a quick table) prints its result or error alone
+LONG_S = 5.0  # a stage that has run this long prints its tenths in a pipe [s]
+_KEY = re.compile(r"^[^\d(:]*")
+_OF = re.compile(r"(\d[\d,]*)\s*(?:of|/)\s*(\d[\d,]*)")
+
+
+def stage_key(stage: str) -> str:
+    """The stage a progress text belongs to: its words before the first digit, parenthesis or
+    colon (``units 33-64 of 1000`` -> ``units``), the whole text if that leaves nothing."""
+    key = _KEY.match(stage).group(0).strip(" ,;-=")  # type: ignore[union-attr]
+    return key or stage
+
+
+def stage_fraction(stage: str, done: int | None, total: int | None) -> float | None:
+    """How far a stage is, from ``done``/``total`` or its text's ``k of n`` / ``k/n`` (the last
+    number of a range: ``units 33-64 of 1000`` is 64/1000); None when neither says."""
+    if done is not None and total:
+        return done / total
+    m = _OF.search(stage)
+    if m:
+        k, n = (int(g.replace(",", "")) for g in m.groups())
+        return k / n if n else None
+    return None
 
 
 class StageReporter:
@@ -26,7 +53,8 @@ class StageReporter:
         self.tty = self.stream.isatty() if tty is None else tty
         self.t0 = time.perf_counter()
         self.last_stage: str | None = None
-        self.seen: set[str] = set()  # stages already announced (pipe)
+        self.seen: dict[str, tuple[float, int]] = {}  # stage key -> (its first line's time,
+        # the tenths printed) in a pipe
         self.pending: tuple[str, int | None] | None = None  # reported within GRACE_S (pipe)
         self.last_draw = 0.0
         self.drawn = 0  # characters of the line on screen (terminal)
@@ -35,15 +63,7 @@ class StageReporter:
         new = stage != self.last_stage
         self.last_stage = stage
         if not self.tty:
-            if stage in self.seen:
-                return
-            if time.perf_counter() - self.t0 < GRACE_S:  # said later, if it lasts
-                self.pending = (stage, total)
-                return
-            if self.pending is not None and self.pending[0] != stage:
-                self._line(*self.pending)
-            self.pending = None
-            self._line(stage, total)
+            self._pipe(stage, done, total)
             return
         if bar:  # the caller draws its own bar
             self.clear()
@@ -61,8 +81,31 @@ class StageReporter:
         self.stream.flush()
         self.drawn = len(text)
 
-    def _line(self, stage: str, total: int | None) -> None:
-        self.seen.add(stage)
+    def _pipe(self, stage: str, done: int | None, total: int | None) -> None:
+        """A pipe: a stage's first line, then at most one per tenth once it has run LONG_S."""
+        key = stage_key(stage)
+        now = time.perf_counter()
+        frac = stage_fraction(stage, done, total)
+        tenth = int(min(max(frac, 0.0), 1.0) * 10 + 1e-9) if frac is not None else 0
+        if key in self.seen:
+            started, shown = self.seen[key]
+            if frac is not None and tenth > shown and now - started >= LONG_S:
+                self.seen[key] = (started, tenth)
+                count = f" {done:,}/{total:,}" if done is not None and total else ""
+                self.stream.write(f"{self.command}: {stage}{count} ({frac:.0%})\n".replace(
+                    "%)", " %)"))
+                self.stream.flush()
+            return
+        if now - self.t0 < GRACE_S:  # said later, if it lasts
+            self.pending = (stage, total)
+            return
+        if self.pending is not None and stage_key(self.pending[0]) != key:
+            self._line(*self.pending)
+        self.pending = None
+        self._line(stage, total, tenth)
+
+    def _line(self, stage: str, total: int | None, tenth: int = 0) -> None:
+        self.seen[stage_key(stage)] = (time.perf_counter(), tenth)
         count = f" ({total:,})" if total else ""
         self.stream.write(f"{self.command}: {stage}{count} ...\n")
         self.stream.flush()
@@ -107,7 +150,7 @@ def stages(command: str, console: Any, err_console: Any):  # type: ignore[no-unt
 
     from rich.console import RenderHook
 
-    from ema_cli.progress import reporting
+    from ema_cli.progress import finished_line, reporting
 
     @contextlib.contextmanager
     def run():  # type: ignore[no-untyped-def]
@@ -119,6 +162,10 @@ def stages(command: str, console: Any, err_console: Any):  # type: ignore[no-unt
             with reporting(reporter, lambda text: err_console.print(text, highlight=False,
                                                                     markup=False)):
                 yield reporter
+                done = finished_line()  # the actual time, after an estimate or a long run
+                if done:
+                    reporter.clear()
+                    err_console.print(done, highlight=False, markup=False)
         finally:
             reporter.clear()
             for c in (console, err_console):

@@ -35,6 +35,7 @@ def reproduce_cmd(
     write REPORT.md, claims.csv, the figures and a manifest. Exits 1 if any claim fails."""
     from ema_cli.api.reproduce import reproduce
     from ema_cli.cli.output import print_table
+    from ema_cli.files import shown
     from ema_cli.units import fmt_num
 
     n_jobs = check_jobs(n_jobs, "--n-jobs")
@@ -51,6 +52,6 @@ def reproduce_cmd(
         console.print(f"threshold {t.spec.id}: {fmt_num(t.value, t.unit, nan='not found')}"
                       + (f" (paper: {t.spec.paper_value:g})" if t.spec.paper_value else ""))
     console.print(f"{len(rep.verdicts) - len(rep.failed)}/{len(rep.verdicts)} claims pass "
-                  f"in {wall:.1f} s -> {run.report}")
+                  f"in {wall:.1f} s -> {shown(run.report)}")
     if rep.failed:
         raise typer.Exit(1)

@@ -37,7 +37,7 @@ def sensitivity_cmd(
     n_jobs: Annotated[int | None, typer.Option(
         "--n-jobs", "-j", help="Workers (processes or threads); -1: all cores.")] = None,
     backend: Annotated[str | None, typer.Option(
-        "--backend", help="auto | loky (processes) | threads (numba prange) | dask.")] = None,
+        "--backend", help="auto | loky (processes) | threads (in this process) | dask.")] = None,
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="Dask scheduler address for --backend dask.")] = None,
     out: Annotated[Path | None, typer.Option("--out", help=out_help(
@@ -68,10 +68,16 @@ def sensitivity_cmd(
     key = "ST" if res.method == "sobol" else "mu_star"
     for r in res.inputs:
         for metric in res.cfg.metrics:
-            t = run.ranked(r.name, metric)
-            top = ", ".join(f"{row['factor']} {row[key]:.3g}" for _, row in
-                            t.head(TOP_FACTORS).iterrows())
-            console.print(f"{r.name} {metric} ({key}, no unit): {top}")
+            top = run.ranking_text(r.name, metric, TOP_FACTORS)
+            console.print(f"{r.name} {metric} ({key} ± 95 % CI, no unit): {top}",
+                          highlight=False)
+            weak = run.imprecise(r.name, metric)
+            if weak:
+                more = f" and {len(weak) - 3} more" if len(weak) > 3 else ""
+                err_console.print(f"[yellow]warning:[/] n = {res.n} is too small to rank "
+                                  f"{r.name} {metric}: {'; '.join(weak[:3])}{more}; "
+                                  "raise --n (the ± over a fifth of the index, or ST "
+                                  "outside [0, 1])", highlight=False)
     for note in res.notes:
         err_console.print(f"[yellow]note:[/] {note}")
     console.print(f"{res.n_runs:,} runs ({res.computed:,} computed, {res.cached:,} cached) in "

@@ -75,7 +75,7 @@ def sweep_cmd(
         "--n-jobs", "-j", help="Workers (processes or threads); -1: all cores "
                                "(default: parallel.n_jobs, else all cores).")] = None,
     backend: Annotated[str | None, typer.Option(
-        "--backend", help="auto | loky (processes) | threads (numba prange) | dask "
+        "--backend", help="auto | loky (processes) | threads (in this process) | dask "
                           "(default: parallel.backend).")] = None,
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="Dask scheduler address for --backend dask, e.g. "

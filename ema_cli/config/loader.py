@@ -391,6 +391,14 @@ def inert_input_warnings(signal: InputSignal, duration: float) -> list[str]:
     return out
 
 
+def check_input_start(signal: InputSignal, duration: float) -> None:
+    """Refuse a run whose input does nothing (:func:`inert_input_warnings`: a reference or a
+    profile that starts at or after the end): its result would answer nothing."""
+    warnings = inert_input_warnings(signal, duration)
+    if warnings:
+        raise EmaError(f"{warnings[0]}; start it earlier or lengthen simulation.duration_s")
+
+
 def resolve_run(cfg: RunConfig, base_dir: Path | None = None) -> ResolvedRun:
     """A validated RunConfig -> ResolvedRun (SI)."""
     params = resolve_params(cfg.plant_overrides(), cfg.nonlinearities, cfg.friction_reading)

@@ -304,7 +304,7 @@ class ParallelConfig(Strict):
                     "cores")
     backend: Literal["auto", "loky", "threads", "dask"] = Field(
         "auto", description="auto (the faster local backend), loky (processes), threads "
-                            "(numba prange in this process) or dask (needs scheduler)")
+                            "(threads in this process) or dask (needs scheduler)")
     scheduler: str | None = Field(None, description="dask scheduler address, e.g. tcp://host:8786")
     chunk_size: PositiveInt | None = Field(
         None, le=MAX_CHUNK,

@@ -191,6 +191,9 @@ def run_block(plan: YieldPlan, start: int, values: np.ndarray,
         data[f"{r.label} [{r.unit}]"] = [vs[i].value for vs in per_unit]
         data[f"{r.label} result"] = [vs[i].result for vs in per_unit]
         data[f"{r.label} margin"] = [margin(vs[i], r.lo, r.hi) for vs in per_unit]
+        # a value outside the test's range is only a bound: which, and its lower end
+        data[f"{r.label} measured"] = [bool(vs[i].measured) for vs in per_unit]
+        data[f"{r.label} lower"] = [float(vs[i].lower) for vs in per_unit]
     for name in names:
         data[f"{name} result"] = [overall([v.result for v in vs if v.test == name])
                                   for vs in per_unit]

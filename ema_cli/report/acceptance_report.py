@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_csv, write_figure, write_json, write_text
 from ema_cli.units import DEG, ZERO_CELSIUS, from_si
+from ema_cli.vocab import free_play
 
 
 def _lines(ax: Any, title: str, xlabel: str, ylabel: str) -> None:
@@ -41,6 +42,13 @@ def figure_step(run: Any, test: Any, title: str) -> Figure:
     ax.plot(d["t"], d["load"] / DEG, "C0", lw=1.4, label="load angle")
     a = d["amplitude_deg"]
     ax.axhspan(a * 0.98, a * 1.02, color="C2", alpha=0.15, label="2 % settling band")
+    limits = getattr(test, "limits", {}) or {}
+    for metric in ("rise_time", "settling_time"):  # time limits: where the step must be by
+        lim = limits.get(metric)
+        if lim is not None and lim.max is not None:
+            t_max = lim.si()[1]
+            ax.axvline(t_max, color="C3" if metric == "settling_time" else "C1", ls=":",
+                       lw=1.2, label=f"{metric} limit {t_max:.4g} s")
     _lines(ax, f"{title}\n{run.name}: {a:g} deg step", "time [s]", "position [deg]")
     ax.legend(fontsize=8, loc="lower right")
     return fig
@@ -115,7 +123,7 @@ def figure_hysteresis(run: Any, test: Any, title: str) -> Figure:
     play = run.values("free_play")[0].value / DEG
     _lines(axes[0], f"command -> load loop (width {hyst:.4g} deg)", "command [deg]",
            "load angle - command [deg]")
-    _lines(axes[1], f"motor -> load lost motion (free play {play:.4g} deg)",
+    _lines(axes[1], f"motor -> load lost motion (free play {free_play(play)})",
            "load angle [deg]", "motor angle / m - load angle [deg]")
     for ax in axes:
         ax.legend(fontsize=8, loc="upper left", markerscale=8)
@@ -137,7 +145,7 @@ def figure_load_deflection(run: Any, test: Any, title: str) -> Figure:
     k = run.values("stiffness")[0].value
     play = run.values("free_play")[0].value / DEG
     _lines(ax, f"{title}\n{run.name}: load deflection, stiffness {k:.4g} N*m/rad, free play "
-               f"{play:.4g} deg", "load torque [N*m]",
+               f"{free_play(play)}", "load torque [N*m]",
            "load angle [deg]")
     ax.legend(fontsize=8, loc="upper left")
     return fig
@@ -192,11 +200,32 @@ def figure_duty(run: Any, test: Any, title: str) -> Figure:
     return fig
 
 
-def test_figure(run: Any, test: Any, title: str) -> Figure:
-    """The figure of one test run (the kind's ``figure`` in :data:`acceptance.kinds.KINDS`)."""
+VERDICT_COLORS = {"PASS": "C2", "FAIL": "C3", "INCONCLUSIVE": "C1"}
+"""The colour of each result in the figures' verdict box."""
+
+
+def test_figure(run: Any, test: Any, title: str, verdicts: Sequence[Any] = ()) -> Figure:
+    """The figure of one test run (the kind's ``figure`` in :data:`acceptance.kinds.KINDS`),
+    with its limits' verdicts (``verdicts``: the rows of this test) in a box at the top right:
+    one line per limit, ``FAIL settling_time 0.42 s (<= 0.3 s)`` in red, PASS green,
+    INCONCLUSIVE orange; a failed test says FAIL in its title."""
     from ema_cli.acceptance.kinds import KINDS
 
-    return globals()[KINDS[run.kind].figure](run, test, title)
+    rows = [v for v in verdicts if v.test == run.name]
+    failed = any(v.result == "FAIL" for v in rows)
+    fig = globals()[KINDS[run.kind].figure](run, test, ("FAIL - " if failed else "") + title)
+    ax = fig.axes[0]
+    lines = [(f"{v.result} {v.metric}" + (f" ({v.condition})" if v.condition else "")
+              + f": {fmt_measured(v)} (limit {fmt_limit(v)} {v.unit})", v.result)
+             for v in rows[:8]]
+    if len(rows) > 8:
+        lines.append((f"... {len(rows) - 8} more limits (acceptance.md)", ""))
+    for k, (text, result) in enumerate(lines):
+        ax.text(0.01, 0.98 - 0.06 * k, text, transform=ax.transAxes, ha="left", va="top",
+                fontsize=8, color=VERDICT_COLORS.get(result, "k"), zorder=5,
+                fontweight="bold" if result == "FAIL" else "normal",
+                bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1})
+    return fig
 
 
 def fmt_value(v: float | None) -> str:
@@ -218,19 +247,15 @@ def fmt_limit(v: Any) -> str:
     return " and ".join(parts)
 
 
-def fmt_measured(v: Any) -> str:
-    """A verdict's value without its unit: the number when measured, else the bound it is
-    known by ("> 2", "<= 0.0001"; "not measured" when nothing is known)."""
-    if v.measured:
-        return fmt_value(v.value)
-    lo, hi = v.lower, v.upper
-    if math.isfinite(lo) and lo > 0 and not math.isfinite(hi):
-        return f"> {fmt_value(lo)}"
-    if math.isfinite(hi) and not (math.isfinite(lo) and lo > 0):
-        return f"<= {fmt_value(hi)}"
-    if math.isfinite(lo) and math.isfinite(hi) and lo > 0:
-        return f"{fmt_value(lo)}..{fmt_value(hi)}"
-    return "not measured"
+def fmt_measured(v: Any, with_unit: bool = True) -> str:
+    """A verdict's value in the one vocabulary (``ema_cli.vocab.quantity``): the number when
+    measured, else the bound it is known by ("> 2 Hz", "<= 0.0001 s"; "not measured" when
+    nothing is known), a margin without crossover in words ("no phase crossover (> 109.4 dB)");
+    ``with_unit`` False: without the unit (a table whose column names it)."""
+    from ema_cli.vocab import quantity
+
+    return quantity(v.value, v.unit if with_unit else "", metric=v.metric, measured=v.measured,
+                    lower=v.lower, upper=v.upper, note=v.note)
 
 
 RESULT_MD = {"PASS": "PASS", "FAIL": "**FAIL**", "INCONCLUSIVE": "_INCONCLUSIVE_"}
@@ -260,7 +285,8 @@ def acceptance_markdown(res: Any) -> str:
              "|---|---|---|---|---|---|---|---|"]
     for v in res.verdicts:
         note = "; ".join(x for x in (v.reason, v.note) if x).replace("|", "\\|")
-        lines.append(f"| {v.test} | {v.metric} | {v.condition} | {fmt_measured(v)} | "
+        shown = fmt_measured(v, with_unit=False)
+        lines.append(f"| {v.test} | {v.metric} | {v.condition} | {shown} | "
                      f"{fmt_limit(v)} | {v.unit} | {RESULT_MD[v.result]} | {note} |")
     lines += ["", "A value measured inside the test's range is PASS or FAIL against its limit. "
               "Outside that range the test only bounds it (`> 2`: above 2): the row is PASS or "
@@ -285,7 +311,7 @@ def write_acceptance(folder: Path, spec_yaml: str, res: Any,
     write_csv(folder / "acceptance.csv", res.to_pandas(), float_format="%.9g")
     for r in res.runs:
         write_figure(folder / f"{r.name}.png", test_figure(r, res.spec.tests[r.name],
-                                                           res.title))
+                                                           res.title, res.verdicts))
         names.append(f"{r.name}.png")
     write_text(folder / "acceptance.md", acceptance_markdown(res))
     names += ["acceptance.md", "manifest.json"]

@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from ema_cli.analysis.linear import Margins
 from ema_cli.report.figures import subplots
 from ema_cli.report.rundir import manifest, write_columns, write_json, write_text
+from ema_cli.vocab import margin_text
 
 OUTPUT_FILES = ("config.resolved.yaml", "margins.json", "loops.csv", "margins.png",
                 "manifest.json")
@@ -29,10 +30,10 @@ def margins_figure(f_hz: np.ndarray, loops: Mapping[str, np.ndarray],
     text_ax.axis("off")
     lines = ["Margins (loop broken at its feedback, the other closed)", ""]
     for loop, m in result.items():
-        gm = (f"{m.gm_db:.3g} dB at {m.f_gm_hz:.3g} Hz" if math.isfinite(m.gm_db)
-              else "infinite (no phase crossover)")
-        pm = (f"{m.pm_deg:.3g} deg at {m.f_pm_hz:.3g} Hz" if math.isfinite(m.pm_deg)
-              else "infinite (no gain crossover)")
+        gm = (f"{margin_text(m.gm_db, 'gain_margin')} at {m.f_gm_hz:.3g} Hz"
+              if math.isfinite(m.gm_db) else margin_text(m.gm_db, "gain_margin"))
+        pm = (f"{margin_text(m.pm_deg, 'phase_margin')} at {m.f_pm_hz:.3g} Hz"
+              if math.isfinite(m.pm_deg) else margin_text(m.pm_deg, "phase_margin"))
         lines += [f"{loop} loop", f"   gain margin   {gm}", f"   phase margin  {pm}", ""]
     text_ax.text(0.02, 0.95, "\n".join(lines), va="top", family="monospace", fontsize=10,
                  transform=text_ax.transAxes)
@@ -41,8 +42,8 @@ def margins_figure(f_hz: np.ndarray, loops: Mapping[str, np.ndarray],
         mag = 20 * np.log10(np.abs(L))
         phase = np.degrees(np.unwrap(np.angle(L)))
         m = result[loop]
-        label = (f"{loop} loop: GM {m.gm_db:.3g} dB, PM {m.pm_deg:.3g} deg"
-                 if math.isfinite(m.gm_db) else f"{loop} loop: GM inf, PM {m.pm_deg:.3g} deg")
+        label = (f"{loop} loop: GM {margin_text(m.gm_db, 'gain_margin')}, "
+                 f"PM {margin_text(m.pm_deg, 'phase_margin')}")
         mag_ax.semilogx(f_hz, mag, color=color, label=label)
         ph_ax.semilogx(f_hz, phase, color=color)
         nic_ax.plot(phase, mag, color=color, label=f"{loop} loop")

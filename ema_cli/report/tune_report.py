@@ -53,12 +53,18 @@ def convergence_figure(res: Any) -> Figure:
     return fig
 
 
+COINCIDE_DEG = 1e-6  # error curves closer than this everywhere are said to coincide [deg]
+
+
 def scenario_figure(res: Any, s: int) -> Figure:
     """Load angle and position error of scenario ``s`` for the default, the start and the
     tuned controllers (degrees, seconds)."""
     sc = res.outcome.problem.scenarios[s]
+    from ema_cli.report.figures import coincidence_note, coinciding
+
     fig, axes = subplots(2, 1, figsize=(10, 8), sharex=True)
     ref_drawn = False
+    errors: dict[str, Any] = {}
     for which in ("reference", "before", "after"):
         ev = res.evaluation(which)
         b = ev.batch
@@ -75,6 +81,7 @@ def scenario_figure(res: Any, s: int) -> Figure:
         lab = f"{LABELS[which]} (ratio {float(ev.ratio[0, s]):.3g})"
         axes[0].plot(t, th, color=color, ls=ls, lw=1.3, label=lab)
         axes[1].plot(t, err, color=color, ls=ls, lw=1.3, label=LABELS[which])
+        errors[LABELS[which]] = err
     axes[0].set_ylabel("load angle theta_L [deg]")
     axes[1].set_ylabel("position error theta_ref - theta_L [deg]")
     axes[1].set_xlabel("time [s]")
@@ -83,7 +90,9 @@ def scenario_figure(res: Any, s: int) -> Figure:
     metric = res.config.cost.metric.upper()
     axes[0].set_title(f"Scenario {sc.name}: response ({metric} ratio to the default "
                       "controller in brackets)")
-    axes[1].set_title("Position error")
+    # a curve drawn under another is said (as freqresp's Bode plot does)
+    note = coincidence_note(coinciding(errors, COINCIDE_DEG), COINCIDE_DEG, "deg")
+    axes[1].set_title("Position error" + (f"\ncurves on each other: {note}" if note else ""))
     for a in axes:
         a.grid(True, alpha=0.3)
     fig.suptitle(res.title)

@@ -191,13 +191,9 @@ def yield_markdown(res: Any) -> str:
     rows = []
     for r in res.plan.rows:
         rate = res.limits[r.label]
-        v = res.samples[f"{r.label} [{r.unit}]"].to_numpy(dtype=float)
-        fin = v[np.isfinite(v)]
+        median, spread = measured_cells(res.samples, r.label, r.unit, r.metric)
         rows.append([r.label, r.limit_text, _pct(rate.value), rate.n_fail,
-                     rate.n_inconclusive,
-                     f"{md_cell(float(np.median(fin)))} {r.unit}" if fin.size else "n/a",
-                     f"{md_cell(float(fin.min()))} to {md_cell(float(fin.max()))} {r.unit}"
-                     if fin.size else "n/a"])
+                     rate.n_inconclusive, median, spread])
     out += [md_table(rows, ["limit", "spec", "yield", "fail", "inconclusive",
                             "median", "range measured"]), ""]
     out += _drivers_md(res) + _worst_md(res)
@@ -206,6 +202,57 @@ def yield_markdown(res: Any) -> str:
     out += [f"- correlation {a} ~ {b}: {c:g} (Gaussian copula)" for a, b, c in corr]
     out += ["", "## Method", "", *_method_md(res)]
     return "\n".join(out) + "\n"
+
+
+def measured_cells(samples: Any, label: str, unit: str, metric: str) -> tuple[str, str]:
+    """The median and range of one limit's values over the units that measured it, in the one
+    vocabulary (``ema_cli.vocab``): a value known only by a bound is not a measurement, so a
+    limit no unit measured reads as its bound (``no phase crossover (> 109.5 dB)``), and the
+    units known only by a bound are counted apart."""
+    from ema_cli.vocab import NOT_MEASURED, number, quantity
+
+    v = samples[f"{label} [{unit}]"].to_numpy(dtype=float)
+    col = f"{label} measured"
+    meas = (samples[col].to_numpy(dtype=bool) if col in samples.columns
+            else np.ones(len(v), dtype=bool))
+    fin = v[np.isfinite(v) & meas]
+    n_bound = int((~meas).sum())
+    if not fin.size:
+        lows = samples.get(f"{label} lower")
+        lows = np.array([]) if lows is None else lows.to_numpy(dtype=float)
+        lows = lows[np.isfinite(lows)]
+        lo = float(lows.min()) if lows.size and n_bound else float("nan")
+        text = quantity(float("nan"), unit, metric=metric, measured=False, lower=lo,
+                        upper=float("inf"))
+        return (text if n_bound else NOT_MEASURED), "n/a"
+    extra = f" ({n_bound} units: a bound only)" if n_bound else ""
+    return (number(float(np.median(fin)), unit) + extra,
+            f"{number(float(fin.min()))} to {number(float(fin.max()), unit)}")
+
+
+def console_lines(res: Any, drivers: int = 3) -> list[str]:
+    """The console's answer after the headline: the limits that fail most with their first
+    ``drivers`` tolerances (SRRC), and the worst unit of the tolerance box (its smallest
+    margin), as short lines (``yield.md`` has the tables)."""
+    out = []
+    failing = sorted((d for d in res.drivers if d["n_fail"] > 0), key=lambda d: -d["n_fail"])
+    for d in failing[:3]:
+        top = ", ".join(f"{p} {b:+.2f}" for p, b in d["drivers"][:drivers] if abs(b) >= 0.05)
+        out.append(f"  drivers of {d['label']} ({d['n_fail']} fail): "
+                   f"{top or 'none above 0.05 (SRRC)'}")
+    w = res.worst
+    if w is not None:
+        found = [(label, v) for label, v in w.limits.items() if v["found"]]
+        if found:
+            label, v = min(found, key=lambda lv: lv[1]["margin"])
+            out.append(f"  worst unit: {label} {md_cell(v['value'])} {v['unit']} against "
+                       f"{v['limit']} (margin {v['margin']:+.3f}, {v['result']}), found by "
+                       f"{v['stage']}")
+        missing = [label for label, v in w.limits.items() if not v["found"]]
+        if missing:
+            out.append(f"  worst unit not found for {len(missing)} limit(s): "
+                       f"{', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}")
+    return out
 
 
 def _drivers_md(res: Any) -> list[str]:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -241,6 +242,34 @@ def ranking(table: pd.DataFrame, method: str) -> pd.DataFrame:
     key = "ST" if method == "sobol" else "mu_star"
     out = table.sort_values(key, ascending=False, kind="stable", ignore_index=True)
     out.insert(0, "rank", np.arange(1, len(out) + 1))
+    return out
+
+
+IMPRECISE_SHARE = 0.2  # an index whose confidence half-width is over this share of it [-]
+
+
+def index_text(row: Any, method: str) -> str:
+    """``Kpp 0.41 ± 0.12``: a factor's ranking index (ST, or mu* for Morris) with its
+    confidence half-width (``*_conf``), as the console prints it."""
+    key = "ST" if method == "sobol" else "mu_star"
+    value, conf = float(row[key]), float(row.get(f"{key}_conf", math.nan))
+    ci = f" ± {conf:.2g}" if math.isfinite(conf) else ""
+    return f"{row['factor']} {value:.3g}{ci}"
+
+
+def imprecise(table: pd.DataFrame, method: str) -> list[str]:
+    """The factors of one indices table whose index is not estimated well enough to rank:
+    its confidence half-width over :data:`IMPRECISE_SHARE` of the value, or (Sobol) ST outside
+    [0, 1] (a total index is a share of the variance) -> short reasons, most influential first."""
+    key = "ST" if method == "sobol" else "mu_star"
+    out = []
+    ordered = table.sort_values(key, ascending=False, kind="stable")  # ranked or not
+    for _, row in ordered.iterrows():
+        value, conf = float(row[key]), float(row.get(f"{key}_conf", math.nan))
+        if method == "sobol" and math.isfinite(value) and not 0.0 <= value <= 1.0:
+            out.append(f"{row['factor']} ST = {value:.3g} (outside [0, 1])")
+        elif math.isfinite(conf) and conf > IMPRECISE_SHARE * abs(value):
+            out.append(f"{row['factor']} {key} = {value:.3g} ± {conf:.2g}")
     return out
 
 

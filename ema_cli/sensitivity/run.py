@@ -25,7 +25,7 @@ from ema_cli.config.run import InputConfig, RunConfig
 from ema_cli.config.sensitivity import SensitivityConfig, check_sobol_n
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
-from ema_cli.progress import BIG_RUN, announce, estimate
+from ema_cli.progress import BIG_RUN, announce_estimate, kernel_seconds
 from ema_cli.sensitivity.analyze import check_output, convergence, empty_table, indices
 from ema_cli.sensitivity.sampling import Design, FactorRange, sample
 from ema_cli.sweep.run import DIVERGED, OK, SweepResult, compute_sweep
@@ -261,14 +261,16 @@ def compute_sensitivity(
     if on_start is not None:
         on_start(result)
     total = design.n_rows * len(studies)
-    if total > BIG_RUN:
-        from ema_cli.sweep.run import resolve_workers
+    from ema_cli.sweep.run import resolve_workers
 
-        sim = studies[0][2].simulation
-        workers = resolve_workers(n_jobs if n_jobs is not None else cfg.parallel.n_jobs)
-        announce(estimate(total, round(sim.duration_s / sim.dt_s), workers)
-                 + f" in all: {len(studies)} input(s) x {design.n_rows:,} ({method}, n = {n}; "
-                 "--n sets it; cached samples are skipped)")
+    sim = studies[0][2].simulation
+    workers = resolve_workers(n_jobs if n_jobs is not None else cfg.parallel.n_jobs)
+    steps = round(sim.duration_s / sim.dt_s)
+    announce_estimate(kernel_seconds(total, steps, workers),
+                      f"{total:,} simulations of {steps:,} steps on {workers} core"
+                      f"{'s' if workers != 1 else ''} in all: {len(studies)} input(s) x "
+                      f"{design.n_rows:,} ({method}, n = {n}; --n sets it; cached samples are "
+                      "skipped)", force=total > BIG_RUN)
     aborted = True
     try:
         for name, inp, study in studies:

@@ -1,13 +1,12 @@
 """Compiling the simulator: what is compiled, whether it is cached, and telling the user
 (compiling everything at once, ``ema compile``, is ``api.kernels``).
 
-The kernel's entry points (``sim.kernel.KERNELS``: one lane or SIMD lanes, serial or
-parallel) are compiled per variant (``kernel.VARIANTS``), each the first time a batch needs
-it, into numba's on-disk cache under the source key of ``ema_cli._numba`` (an edit of the
-model or the kernel selects a new, empty folder). A marker file per compiled unit in that
-folder says the unit is cached: a unit without one is compiled now, and that is announced on
-stderr ("compiling the simulator ... first run after an install or an edit, ~N s"), with the
-time it took once done.
+The kernel's entry points (``sim.kernel.KERNELS``: one lane or SIMD lanes) are compiled per
+variant (``kernel.VARIANTS``), each the first time a batch needs it, into numba's on-disk cache
+under the source key of ``ema_cli._numba`` (an edit of the model or the kernel selects a new,
+empty folder). A marker file per compiled unit in that folder says the unit is cached: a unit
+without one is compiled now, and that is announced on stderr ("compiling the simulator ...
+first run after an install or an edit, ~N s"), with the time it took once done.
 """
 
 from __future__ import annotations
@@ -22,17 +21,16 @@ from pathlib import Path
 from ema_cli import progress
 
 # seconds one unit takes to compile on this kind of machine (2 idle cores, `ema compile` from
-# an empty cache: the 12 lane units 67 s in one process, the 8 one-lane units and the
-# identification kernels ~45 s in the other): the announcements' estimate
-COMPILE_S = {"rows": 6.0, "rows-parallel": 4.0, "lanes": 7.0, "lanes-parallel": 4.5,
-             "identify": 4.0}
+# an empty cache, measured as CPU time on a loaded machine: the 4 one-lane units 41 s in one
+# process, the first 20 s of it the callees they share; the 3 lane units 38 s in the other, the
+# identification kernels 3 s): the announcements' estimate
+COMPILE_S = {"rows": 10.0, "lanes": 12.0, "identify": 3.0}
 QUIET_ENV = "EMA_COMPILE_QUIET"  # set: compile without announcing (ema compile's workers)
 
 
-def entry_name(parallel: bool, lanes: int, variant: int) -> str:
-    """The unit's name: ``lanes-parallel/v5`` (``variant``: ``model.actuator``'s code)."""
-    base = ("lanes" if lanes > 1 else "rows") + ("-parallel" if parallel else "")
-    return f"{base}/v{int(variant)}"
+def entry_name(lanes: int, variant: int) -> str:
+    """The unit's name: ``lanes/v1`` (``variant``: ``model.actuator``'s code)."""
+    return f"{'lanes' if lanes > 1 else 'rows'}/v{int(variant)}"
 
 
 def describe(name: str) -> str:
@@ -43,8 +41,7 @@ def describe(name: str) -> str:
         return name
     base, v = name.split("/")
     width = "16 lanes" if base.startswith("lanes") else "one lane"
-    par = ", parallel" if base.endswith("parallel") else ""
-    return f"{width}{par}, {describe_variant(int(v[1:]))}"
+    return f"{width}, {describe_variant(int(v[1:]))}"
 
 
 def _cache_dir() -> Path:
@@ -101,9 +98,8 @@ def kernel_units() -> list[str]:
 
     out = []
     for lanes in (1, LANES):
-        for parallel in (False, True):
-            for variant in VARIANTS[lanes]:
-                out.append(entry_name(parallel, lanes, variant))
+        for variant in VARIANTS[lanes]:
+            out.append(entry_name(lanes, variant))
     return out
 
 

@@ -20,6 +20,7 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -195,8 +196,8 @@ def kernel_signature(variant: int = 0) -> tuple:
             types.literal(int(variant)))
 
 
-def load_kernel(parallel: bool, lanes: int, variant: int = 0) -> float:
-    """Load the kernel entry point for (``parallel``, ``lanes``) in ``variant`` into this
+def load_kernel(lanes: int, variant: int = 0) -> float:
+    """Load the kernel entry point for ``lanes`` (1 or :data:`LANES`) in ``variant`` into this
     process -> the seconds it took (0 if it was loaded already).
 
     The dispatcher is asked to compile :func:`kernel_signature`, the exact argument types
@@ -206,27 +207,62 @@ def load_kernel(parallel: bool, lanes: int, variant: int = 0) -> float:
     """
     from ema_cli.sim import compiled
 
-    disp = KERNELS[(bool(parallel), lanes > 1)]
+    disp = KERNELS[lanes > 1]
     if not hasattr(disp, "compile"):  # NUMBA_DISABLE_JIT: plain Python
         return 0.0
     sig = kernel_signature(variant)
     if sig in disp.overloads:
         return 0.0
     t0 = time.perf_counter()
-    with compiled.announce(compiled.entry_name(parallel, lanes, variant)):
+    with compiled.announce(compiled.entry_name(lanes, variant)):
         disp.compile(sig)
     return time.perf_counter() - t0
 
 
-def entry_point(parallel: bool, lanes: int, variant: int) -> Callable[..., None]:
+def entry_point(lanes: int, variant: int) -> Callable[..., None]:
     """The compiled entry point of ``variant`` as a plain function (the machine code's own
     wrapper: calling the dispatcher would retype the literal variant argument on every call,
     milliseconds each); loaded first (:func:`load_kernel`)."""
-    disp = KERNELS[(bool(parallel), lanes > 1)]
+    disp = KERNELS[lanes > 1]
     if not hasattr(disp, "compile"):  # NUMBA_DISABLE_JIT: plain Python
         return disp
-    load_kernel(parallel, lanes, variant)
+    load_kernel(lanes, variant)
     return disp.overloads[kernel_signature(variant)].entry_point
+
+
+@functools.cache
+def _pool(threads: int) -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="ema-kernel")
+
+
+def blocks(n_units: int, threads: int) -> list[tuple[int, int]]:
+    """``n_units`` (rows, or chunks of lanes) cut into at most ``threads`` contiguous blocks of
+    near-equal size -> [(first, end)] (numba's static ``prange`` schedule)."""
+    k = max(1, min(threads, n_units))
+    edges = [n_units * i // k for i in range(k + 1)]
+    return [(edges[i], edges[i + 1]) for i in range(k) if edges[i + 1] > edges[i]]
+
+
+def _run_blocks(kernel: Callable[..., None], width: int, threads: int, Pv: np.ndarray,
+                state: np.ndarray, qv: np.ndarray, ov: np.ndarray, args: tuple) -> None:
+    """One call of an entry point over every row of ``Pv``, in blocks on ``threads`` threads
+    (the entry points release the GIL; each block writes its own rows of the results and its
+    own slice of ``state``, so the results are those of one serial call, bit for bit)."""
+    n = Pv.shape[0]
+    n_units = n if width == 1 else -(-n // LANES)
+    parts = blocks(n_units, threads)
+    if len(parts) == 1:
+        kernel(Pv, state, *args[:5], qv, ov, *args[5:])
+        return
+
+    def one(part: tuple[int, int]) -> None:
+        g0, g1 = part
+        a, b = g0 * width, min(g1 * width, n)
+        st = state[g0:g1] if state.shape[0] else state
+        kernel(Pv[a:b], st, *args[:5], qv[a:b], ov[a:b], *args[5:])
+
+    for f in [_pool(threads).submit(one, p) for p in parts]:
+        f.result()
 
 
 def _gib(n: float) -> str:
@@ -297,11 +333,12 @@ def simulate_batch(
     Row c follows ``refs[ref_index[c]]`` (``ref_index`` None: all follow ``refs[0]``): an
     :class:`InputSignal` (sampled per time chunk), a :class:`Sampler` from ``signals.sampler``
     for this grid, or a :class:`Reference` sampled for the whole grid. ``dec`` > 0 records
-    signals every ``dec`` steps. ``parallel`` spreads the chunks over numba threads; ``lanes``
-    is 1 (each configuration alone) or :data:`kernel.LANES` (chunks in SIMD lanes), default
-    :func:`lanes_for`; rows that need the extras variant run one lane at a time either way
-    (:data:`EXTRAS_LANES`). ``progress(fraction)`` is called after each time chunk with the fraction
-    of the steps done. Results are bit-identical whatever ``parallel``, ``lanes`` and
+    signals every ``dec`` steps. ``parallel`` spreads blocks of rows over
+    ``numba.get_num_threads()`` threads; ``lanes`` is 1 (each configuration alone) or
+    :data:`kernel.LANES` (chunks in SIMD lanes), default :func:`lanes_for`; rows that need the
+    extras variant run one lane at a time either way (:data:`EXTRAS_LANES`).
+    ``progress(fraction)`` is called after each time chunk with the fraction of the steps done.
+    Results are bit-identical whatever ``parallel``, ``lanes`` and
     :data:`TIME_CHUNK` are. ``n_signals`` how many signals to record (default
     :func:`signal_count`; a sweep passes its own for every batch). Raises EmaError when the
     recorded signals would not fit in memory (:func:`check_memory`).
@@ -322,8 +359,9 @@ def simulate_batch(
     info = np.ascontiguousarray(np.stack([s.step_info for s in sources]), dtype=np.float64)
     with_load = any(s.has_load for s in sources)
     with_ext = any(s.has_ext for s in sources)
+    threads = numba.get_num_threads() if parallel else 1
     if lanes is None:
-        lanes = lanes_for(n_cases, numba.get_num_threads() if parallel else 1)
+        lanes = lanes_for(n_cases, threads)
     if lanes not in (1, LANES):
         raise ValueError(f"lanes must be 1 or {LANES}, got {lanes}")
     chunk = max(int(TIME_CHUNK), 1)
@@ -360,8 +398,8 @@ def simulate_batch(
     calls = []
     load_s = 0.0
     for variant, width, a, b, shape in parts:
-        load_s += load_kernel(parallel, width, variant)  # 0 when loaded already
-        kernel = entry_point(parallel, width, variant)
+        load_s += load_kernel(width, variant)  # 0 when loaded already
+        kernel = entry_point(width, variant)
         state = np.empty(shape)
         # lanes of the state that hold a real row (the rest repeat the first row of a chunk)
         real = (np.arange(shape[0])[:, None] * width + np.arange(width)[None, :]) < (b - a)
@@ -378,8 +416,9 @@ def simulate_batch(
         pos, vel, load, ext = _inputs(sources, k0, k1, with_load, with_ext)
         t0 = time.perf_counter()
         for kernel, variant, Pv, state, qv, ov, _ in calls:
-            kernel(Pv, state, pos, vel, load, ext, info, qv, ov, dt, n_steps, k0, k1, dec, sig,
-                   met, variant)
+            width = state.shape[2]
+            _run_blocks(kernel, width, threads, Pv, state, qv, ov,
+                        (pos, vel, load, ext, info, dt, n_steps, k0, k1, dec, sig, met, variant))
         kernel_s += time.perf_counter() - t0
         if progress is not None:
             progress(min(k1, n_steps + 1) / (n_steps + 1))

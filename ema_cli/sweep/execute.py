@@ -1,7 +1,7 @@
 """Sweep chunks on the executor (``sweep.executor``): in-process (serial or numba threads),
 loky or dask.
 
-One level of parallelism at a time: either numba ``prange`` threads over one chunk in this
+One level of parallelism at a time: either threads over blocks of one chunk in this
 process (backend ``threads``), or worker processes (``loky``) / a Dask cluster (``dask``) each
 running whole chunks with numba pinned to one thread. The kernel is warmed in the parent before
 any worker starts, so workers only load it from numba's on-disk cache. Each chunk is one kernel
@@ -102,11 +102,10 @@ def run_chunk(P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
               threads: int, n_signals: int | None = None) -> ChunkOutput:
     """Worker side: one kernel call on the parameter matrix ``P`` (SI) with ``threads`` threads.
 
-    ``threads`` = 0 runs the serial kernel (no numba threading layer: safe in any thread);
-    ``threads`` >= 1 runs the prange kernel on that many numba threads (on a Dask worker
-    running several task threads, the executor makes it the serial kernel). Both
-    give bit-identical results; the prange-compiled kernel is faster even on one thread
-    (measured on 2 cores: 6.3 vs 10.1 ms per 1e5-step job), so local runs use it. Exceptions are
+    ``threads`` = 0 runs the kernel in this thread; ``threads`` >= 1 spreads blocks of the
+    chunk over that many threads (``sim.runner.simulate_batch``; on a Dask worker running
+    several task threads, the executor makes it one thread). Both run the same compiled entry
+    point and give bit-identical results. Exceptions are
     returned as text so one bad chunk does not stop the sweep. ``n_signals``: the signals
     every chunk of the sweep records (``sim.runner.signal_count`` of all its jobs).
     """
@@ -129,9 +128,8 @@ def run_chunk(P: np.ndarray, signal: Source, dt: float, n_steps: int, dec: int,
 
 
 def warm_kernel(signal: Source, dt: float, threads: int) -> float:
-    """Compile or load the kernel entry points ``threads`` selects (serial or prange; one lane
-    and SIMD lanes), here, before workers start, with a tiny run of each (which also starts
-    numba's thread pool) [s]. A Sampler's first steps are taken as they are (not sampled
+    """Compile or load the kernel entry points (one lane and SIMD lanes), here, before workers
+    start, with a tiny run of each [s]. A Sampler's first steps are taken as they are (not sampled
     again)."""
     from ema_cli.model.params import resolve, to_row
     from ema_cli.sim.kernel import LANES

@@ -50,7 +50,7 @@ from ema_cli.sweep.pools import LOST, DaskPool, LokyPool, describe, killed_worke
 
 BACKENDS = ("auto", "loky", "threads", "dask")
 LOCAL_DEFAULT = "threads"
-"""What ``auto`` means on one machine: numba prange threads in this process. Measured with
+"""What ``auto`` means on one machine: threads in this process (numba's count). Measured with
 experiments/bench_sweep.py (1,000 jobs of 1 s, 2 cores, fresh processes, medians of 5): threads
 3.85 s end to end, loky 4.73 s; the kernel time is the same (3.43 s vs 3.46 s), loky's extra
 ~1 s is starting the workers and loading the kernel in each."""

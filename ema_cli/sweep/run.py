@@ -66,6 +66,7 @@ class _Progress:
         from ema_cli.progress import report
 
         self.bar = None
+        self.total, self.done, self.enabled = total, 0, enabled
         if total > 0:
             report("simulations", 0, total, bar=enabled)
         if enabled and total > 0:
@@ -92,6 +93,10 @@ class _Progress:
         return self
 
     def advance(self, n: int) -> None:
+        from ema_cli.progress import report
+
+        self.done += n
+        report("simulations", self.done, self.total, bar=self.enabled)  # the API's hook too
         if self.bar is not None:
             self.bar.advance(self.task, n)
 
@@ -291,7 +296,7 @@ class _Run:
         self.bar = _Progress(sum(len(self.by_key[k]) for k in pending), progress, label)
         with self.bar:
             if chunks and setup.backend != "dask":
-                timings["warm"] = warm_kernel(reference, plan.dt, 1)  # the prange kernel
+                timings["warm"] = warm_kernel(reference, plan.dt, 1)  # the threaded run
             t1 = time.perf_counter()
             try:
                 retried = execute(chunks, reference, plan.dt, plan.n_steps, plan.dec,

@@ -336,3 +336,21 @@ def test_bad_tune_options(tmp_path, args, needles):
     one_clear_line(invoke("tune", str(ROOT / "configs" / "tune.yaml"), *args,
                           "--out", str(tmp_path / "o")), *needles)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("key", ["input", "load"])
+def test_a_profile_that_starts_after_the_end_is_refused(tmp_path, key):
+    # issue 39: a profile whose first row is at or after the end of the run is never applied:
+    # the run is refused in one line naming the key (exit 2), nothing is simulated
+    prof = tmp_path / "late.csv"
+    col = "theta_ref_deg" if key == "input" else "torque_nm"
+    prof.write_text(f"t_s,{col}\n2.0,0.0\n3.0,1.0\n")
+    sets = (["--set", "input.kind=csv", "--set", f"input.path={prof}"] if key == "input"
+            else ["--set", f"load.profile={prof}"])
+    r = runner.invoke(app, ["simulate", *sets, "--set", "simulation.duration_s=1",
+                            "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2, r.output
+    err = [ln for ln in r.output.splitlines() if ln.startswith("error:")]
+    assert len(err) == 1 and "starts at 2 s" in err[0]
+    assert ("input.path" if key == "input" else "load.profile") in err[0]
+    assert not (tmp_path / "o" / "signals.csv").exists()

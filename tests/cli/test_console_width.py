@@ -237,3 +237,37 @@ def test_threshold_table_units(width, tmp_path):
     assert f"{res['threshold']:.5g} deg" in flat
     assert f"[{res['bracket'][0]:.5g} deg, {res['bracket'][1]:.5g} deg]" in flat
     assert f"{100 * res['relative_width']:.2g} %" in flat
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_help_summaries_are_whole(width):
+    # `ema --help` used to cut every summary with "...": each command's summary is printed
+    # whole, on one line, at 80 columns
+    from ema_cli.cli.main import COMMANDS, SHORT_HELP
+
+    r, out = invoke(width, "--help")
+    assert r.exit_code == 0
+    check_width(out, width)
+    assert "..." not in out.split("\n", 1)[1]  # the usage line's [ARGS]... is click's
+    for name, _ in COMMANDS:
+        line = next(ln for ln in out.splitlines() if ln.strip().startswith(name + " "))
+        assert line.strip().endswith(SHORT_HELP[name]), line
+
+
+def test_closed_loop_table_keeps_the_interval_at_80_columns(monkeypatch, capsys):
+    # issue 39: at 80 columns the closed-loop table dropped its 95 % interval, the column an
+    # identification is for; now the standard error (and the truth columns) go first
+    from ema_cli.cli import common, identify_logs
+
+    monkeypatch.setenv("COLUMNS", "80")
+    monkeypatch.setattr(common.console, "width", 80)  # restored after the test
+    p = {"value": 598.123456, "standard_error": 3.21, "ci95": [591.8321, 604.4148],
+         "determined": True, "unit": "N*m/rad"}
+    params = {"kL": p, "alpha": {**p, "unit": "deg"}, "Fc": {**p, "unit": "N*m"},
+              "sigma2": {**p, "unit": "N*m*s/rad"}}
+    identify_logs._table("closed-loop fit", params, {"kL": 600.0, "alpha": 0.5, "Fc": 0.2,
+                                                      "sigma2": 0.01})
+    out = capsys.readouterr().out
+    check_width(out, 80)
+    assert "95 % interval" in out and "[591.832, 604.415 N*m/rad]" in out
+    assert "not shown at 80 columns" in out and "SE" in out.split("not shown")[1]

@@ -58,6 +58,13 @@ def test_a_run_writes_every_file_and_answers_first(files, tmp_path):
     assert "## Why units fail" in md and "## Worst case" in md
     w = js["worst_case"]["limits"]["step/settling_time"]
     assert w["found"] and w["values"]["nonlinearities.deadzone2"] == pytest.approx(0.003)
+    # the console answers too: the worst unit (the same value as yield.json's), the drivers of
+    # a failing limit (when one fails) and where the tables are
+    worst = [ln for ln in lines if ln.startswith("  worst unit: step/settling_time ")]
+    assert len(worst) == 1 and f"margin {w['margin']:+.3f}" in worst[0]
+    if js["overall"]["n_fail"]:
+        assert any(ln.startswith("  drivers of step/settling_time") for ln in lines)
+    assert "(yield.md: per limit, drivers, the worst case)" in " ".join(r.output.split())
 
 
 @pytest.mark.parametrize(("required", "code", "word"), [

@@ -26,9 +26,9 @@ def test_a_cold_unit_is_announced_compiled_once_and_then_marked_cached(tmp_path)
     # one unit (one lane, no friction: what `ema simulate` needs) in a fresh cache: announced
     # on stderr with its estimate, compiled, marked; a second process loads it silently
     script = ("from ema_cli.sim import compiled, runner\n"
-              "name = compiled.entry_name(False, 1, 0, False)\n"
+              "name = compiled.entry_name(1, 0)\n"
               "print(compiled.is_cached(name))\n"
-              "runner.load_kernel(False, 1, 0, False)\n"
+              "runner.load_kernel(1, 0)\n"
               "print(compiled.is_cached(name))\n")
     env = {**os.environ, "EMA_CACHE_DIR": str(tmp_path / "cache")}
     env.pop("NUMBA_DISABLE_JIT", None)
@@ -53,14 +53,14 @@ def test_units_cover_every_entry_point_and_variant():
 
     names = kernels.units()
     assert len(names) == len(set(names))
-    expected = 2 * len(VARIANTS[1]) + 2 * len(VARIANTS[LANES]) + 1  # + identification
-    assert len(names) == expected == 21
-    for (parallel, lanes) in KERNELS:
+    expected = len(VARIANTS[1]) + len(VARIANTS[LANES]) + 1  # + identification
+    assert len(names) == expected == 8
+    for lanes in KERNELS:
         width = LANES if lanes else 1
         for variant in VARIANTS[width]:
-            assert compiled.entry_name(parallel, width, variant) in names
-    assert compiled.describe("lanes-parallel/v5") == (
-        "16 lanes, parallel, LuGre (exponent 1), extras")
+            assert compiled.entry_name(width, variant) in names
+    assert compiled.describe("lanes/v1") == "16 lanes, LuGre (exponent 1)"
+    assert compiled.describe("rows/v6") == "one lane, LuGre, extras"
 
 
 def test_families_are_dealt_whole_to_processes():
@@ -82,14 +82,14 @@ def test_ema_compile_from_scratch_then_warm(tmp_path):
     cache = tmp_path / "cache"
     cold = _ema(["compile"], cache)
     assert cold.returncode == 0, cold.stderr
-    assert "compiling the simulator: 21 of 21 units" in cold.stderr
-    assert "[21/21]" in cold.stderr
+    assert "compiling the simulator: 8 of 8 units" in cold.stderr
+    assert "[8/8]" in cold.stderr
     for line in (cold.stderr + cold.stdout).splitlines():  # an 80-column terminal
         assert len(line) <= 80, line
-    assert "kernels: all 21 units compiled and cached" in cold.stdout
+    assert "kernels: all 8 units compiled and cached" in cold.stdout
     warm = _ema(["compile"], cache)
     assert warm.returncode == 0
     assert warm.stderr == ""
-    assert "kernels: all 21 units compiled and cached" in warm.stdout
+    assert "kernels: all 8 units compiled and cached" in warm.stdout
     secs = float(warm.stdout.rsplit("(", 1)[1].split(" s)")[0])
     assert secs < 2.0

@@ -444,8 +444,10 @@ def test_variant_arguments_of_each_lane_width():
     assert kernel.variant_args(6, kernel.LANES) == 6
     paper = (0, 1, 2, 4, 5, 6)
     assert set(kernel.VARIANTS[1]) == {kernel.variant_args(c, 1) for c in paper}
+    # the extras (4-6) run one lane at a time whatever the batch: lanes never need them
+    assert [c for c in paper if kernel.one_lane_only(c)] == [4, 5, 6]
     assert set(kernel.VARIANTS[kernel.LANES]) == {kernel.variant_args(c, kernel.LANES)
-                                                  for c in paper}
+                                                  for c in paper if not kernel.one_lane_only(c)}
 
 
 def test_a_batch_of_mixed_variants_equals_its_single_runs():
@@ -471,9 +473,9 @@ def test_extras_rows_run_one_lane_at_a_time_in_a_lane_batch(monkeypatch):
     seen = []
     real = runner.entry_point
 
-    def spy(parallel, lanes, variant):
+    def spy(lanes, variant):
         seen.append((lanes, variant))
-        return real(parallel, lanes, variant)
+        return real(lanes, variant)
 
     monkeypatch.setattr(runner, "entry_point", spy)
     rows = [{}, {"Ts": 1e-4}, {"dzi_v": 0.5, "friction": 1}, {"friction": 1}] * 6

@@ -23,14 +23,83 @@ def test_pipe_prints_one_line_per_stage():
     rep = StageReporter("identify", out)
     assert not rep.tty
     rep.t0 -= 10  # long past the grace period
-    for g in range(1, 201):
+    for g in range(1, 201):  # a quick stage (under LONG_S): its first line only
         rep("GA generation", g, 200, False)
     rep("polish over 0.5 s", 0, 2, False)
-    rep("polish over 1 s", 1, 2, False)
+    rep("polish over 1 s", 1, 2, False)  # the same stage ("polish over"), further on
     rep("GA generation", 1, 5, False)  # a stage seen before: not announced again
     assert out.getvalue().splitlines() == ["identify: GA generation (200) ...",
-                                           "identify: polish over 0.5 s (2) ...",
-                                           "identify: polish over 1 s (2) ..."]
+                                           "identify: polish over 0.5 s (2) ..."]
+
+
+class FakeClock:
+    """``time`` for cli.progress: ``perf_counter`` advances ``step`` seconds per reading."""
+
+    def __init__(self, step: float) -> None:
+        self.now = 0.0
+        self.step = step
+
+    def perf_counter(self) -> float:
+        self.now += self.step
+        return self.now
+
+
+def _pipe_lines(monkeypatch, calls, step=3.0):
+    import ema_cli.cli.progress as cp
+
+    monkeypatch.setattr(cp, "time", FakeClock(step))  # every stage long (LONG_S = 5 s)
+    out = io.StringIO()
+    rep = StageReporter("cmd", out)
+    for stage, done, total in calls:
+        rep(stage, done, total, False)
+    return out.getvalue().splitlines()
+
+
+@pytest.mark.parametrize("name,calls", [
+    # closed-loop identification: 12 starts x 3 joint-fit rounds (issue 39: 36 lines)
+    ("joint fit", [(f"joint fit, round {r} of 3 (J = {1 / (s + r):.4g})", None, None)
+                   for s in range(12) for r in (1, 2, 3)]),
+    # yield: 40 blocks of 25 units x 10 tests, then the worst case's stages per test
+    ("yield", [(f"units {25 * b + 1}-{25 * b + 25} of 1000 (25 units): test {t}/10 t{t}",
+                None, None) for b in range(40) for t in range(1, 11)]
+     + [(f"worst case, {st} ({n} units): test 1/1 t{t}", None, None)
+        for t in range(10) for st, n in (("corners", 16), ("search", 20))]),
+    # the GA: 200 generations, each a report
+    ("GA", [("GA generation", g, 200) for g in range(1, 201)]),
+    # design: 17 cases x the acceptance battery's 8 tests
+    ("design", [(f"test {k}/8 t{k} (step)", None, None) for c in range(17)
+                for k in range(1, 9)]),
+])
+def test_pipe_prints_at_most_one_line_per_tenth_of_a_stage(monkeypatch, name, calls):
+    from ema_cli.cli.progress import stage_key
+
+    lines = _pipe_lines(monkeypatch, calls)
+    keys = {stage_key(s) for s, _, _ in calls}
+    per_key: dict[str, int] = {}
+    for ln in lines:
+        key = stage_key(ln.split(": ", 1)[1])
+        per_key[key] = per_key.get(key, 0) + 1
+    assert set(per_key) == keys  # every stage said once at least
+    # its first line, then at most one per 10 % (the 10 tenths)
+    assert all(n <= 11 for n in per_key.values()), per_key
+    assert len(lines) <= 11 * len(keys)
+    pcts = [ln for ln in lines if ln.endswith("%)")]
+    for ln in pcts:  # a tenth's line says how far the stage is
+        assert 0 < int(ln.rsplit("(", 1)[1].split(" %")[0]) <= 100
+
+
+def test_stage_keys_and_fractions():
+    from ema_cli.cli.progress import stage_fraction, stage_key
+
+    assert stage_key("joint fit, round 2 of 3 (J = 0.01)") == "joint fit, round"
+    assert stage_key("units 33-64 of 1000 (32 units): test 3/10 x") == "units"
+    assert stage_key("worst case, search (20 units): test 1/1 x") == "worst case, search"
+    assert stage_key("12 things") == "12 things"
+    assert stage_fraction("units 33-64 of 1000", None, None) == 64 / 1000
+    assert stage_fraction("joint fit, round 2 of 3", None, None) == 2 / 3
+    assert stage_fraction("test 3/10 x", None, None) == 0.3
+    assert stage_fraction("GA generation", 50, 200) == 0.25
+    assert stage_fraction("reading the log", None, None) is None
 
 
 def test_pipe_says_nothing_of_a_command_that_ends_at_once():
@@ -94,7 +163,18 @@ def test_estimate_and_announce():
     with progress.reporting(None, said.append):
         progress.announce_size(progress.BIG_RUN, 10, 2)  # not above the threshold
         progress.announce_size(progress.BIG_RUN + 1, 10, 2, "--n sets it")
-    assert said == ["10,001 simulations of 10 steps, ~1 s on 2 cores (--n sets it)"]
+    assert said == ["estimated time ~1 s: 10,001 simulations of 10 steps on 2 cores "
+                    "(--n sets it)"]
+    said.clear()
+    with progress.reporting(None, said.append):
+        progress.announce_size(100, 10**5, 2)  # 100 x 1e5 x 22 ns / 2: 0.11 s, not said
+        assert said == [] and progress.timing()["estimated_s"] == pytest.approx(0.11)
+        progress.announce_size(100, 10**7, 2)  # 11 s: above ESTIMATE_MIN_S, said
+        assert said == ["estimated time ~11 s: 100 simulations of 10,000,000 steps on 2 cores"]
+        assert progress.timing()["estimated_s"] == pytest.approx(11.11)
+        assert progress.finished_line().startswith("took ")
+        assert progress.finished_line().endswith("(estimated ~11 s)")
+    assert progress.elapsed(192.4) == "3 min 12 s" and progress.duration(192.4) == "~3 min"
 
 
 def test_sensitivity_announces_its_size_before_any_simulation():
@@ -115,7 +195,10 @@ def test_sensitivity_announces_its_size_before_any_simulation():
     with progress.reporting(None, announcer), pytest.raises(Stop):
         compute_sensitivity(cfg, n_jobs=2)
     (text,) = said
-    assert text.startswith(f"{cfg.runs('sobol', 4096):,} simulations of 100,000 steps")
+    # the estimate from the same cost model the limits use (progress.CPU_S_PER_STEP)
+    sims = cfg.runs("sobol", 4096)
+    est = progress.duration(progress.kernel_seconds(sims, 100_000, 2))
+    assert text.startswith(f"estimated time {est}: {sims:,} simulations of 100,000 steps")
     assert "on 2 cores" in text and "--n sets it" in text
 
 

@@ -218,3 +218,21 @@ def test_bootstrap_half_widths_approach_the_asymptotic_ones():
     # half-widths scale with the z of the confidence level
     _, a90 = sobol_conf_asymptotic(y, 3, 0.90)
     np.testing.assert_allclose(a90 / a_st, 1.6448536269514722 / 1.959963984540054)
+
+
+def test_the_console_flags_indices_too_imprecise_to_rank():
+    # issue 39: the console prints the ± next to each index and names the indices whose
+    # half-width is over a fifth of the value, or whose ST lies outside [0, 1] (hand table)
+    import pandas as pd
+
+    from ema_cli.sensitivity.analyze import imprecise, index_text, ranking
+
+    t = pd.DataFrame({"factor": ["a", "b", "c", "d"], "S1": [0.5, 0.2, 0.1, 0.0],
+                      "S1_conf": [0.01] * 4, "ST": [0.6, 1.15, 0.3, 0.01],
+                      "ST_conf": [0.05, 0.1, 0.2, 0.001]})
+    # b: outside [0, 1]; c: 0.2 > 0.3 / 5; a: 0.05 <= 0.12; d: 0.001 <= 0.002
+    assert imprecise(t, "sobol") == ["b ST = 1.15 (outside [0, 1])", "c ST = 0.3 ± 0.2"]
+    assert imprecise(ranking(t, "sobol"), "sobol") == imprecise(t, "sobol")  # ranked or not
+    assert index_text(t.iloc[0], "sobol") == "a 0.6 ± 0.05"
+    m = pd.DataFrame({"factor": ["a"], "mu_star": [2.0], "mu_star_conf": [0.5]})
+    assert imprecise(m, "morris") == ["a mu_star = 2 ± 0.5"]

@@ -302,7 +302,7 @@ def test_kernel_time_excludes_loading_and_calls_compile_nothing_new(monkeypatch)
     P, q = batch(1)
     res = run(monkeypatch, 100, P=P, q=q, lanes=kernel.LANES)
     again = run(monkeypatch, 100, P=P, q=q, lanes=kernel.LANES)
-    assert again.load_s == 0.0 and load_kernel(False, kernel.LANES) == 0.0
+    assert again.load_s == 0.0 and load_kernel(kernel.LANES) == 0.0
     for r in (res, again):
         assert r.kernel_s > 0.0
     # every compiled version of the entry point has a signature load_kernel prepares (one per
@@ -310,7 +310,7 @@ def test_kernel_time_excludes_loading_and_calls_compile_nothing_new(monkeypatch)
     # timed region
     # (other tests in this process may have run other actuators' variants: any variant literal
     # counts, any other argument type would be a compile of its own)
-    disp = kernel.KERNELS[(False, True)]
+    disp = kernel.KERNELS[True]
     for sig in disp.overloads:
         assert sig == runner.kernel_signature(sig[-1].literal_value)
     prepared = {runner.kernel_signature(v) for v in kernel.VARIANTS[kernel.LANES]}
