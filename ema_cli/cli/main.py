@@ -108,6 +108,7 @@ SHORT_HELP = {
     "margins": "Gain and phase margins of the position and speed loops.",
     "freqresp": "Frequency response of the load angle by simulation.",
     "acceptance": "Run an acceptance battery: PASS, FAIL or INCONCLUSIVE.",
+    "duty": "A mission profile: winding temperature, RMS, life, a verdict.",
     "yield": "Production yield over toleranced units, with its interval.",
     "tune": "Tune the controller's free variables to the scenarios.",
     "sensitivity": "Global sensitivity of metrics to factors (Sobol, Morris).",
