@@ -42,9 +42,6 @@ from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_cluster
 
 LAWS = ("auto", "symmetric", "per-direction")
 SUBSTEPS = 10  # kernel steps per controller sample (a rigid axis' own time constant is long)
-MIN_CLUSTERS = 20  # independent residual blocks a verdict needs [-]
-BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
-BLOCK_MIN_S = 0.25  # ... and at least this long [s]
 SAMPLE_TOL = 0.01  # the record's sample interval may differ from the controller's by 1 % [-]
 
 
@@ -129,11 +126,6 @@ def _plant(settings: PlantSettings, base: dict, resolve: Callable, prm: dict,
                               static_follows, mass_extra)
 
 
-def _kinematics(plant: oe.ClosedLoopPlant, x: np.ndarray, prm: dict) -> tuple[np.ndarray, ...]:
-    """(F, q, v, a) simulated at ``x`` (``ClosedLoopPlant.motion``)."""
-    return plant.motion(np.asarray(x, dtype=np.float64))
-
-
 def benchmark_errors_on(record: PlantRecord, idx: np.ndarray, q_s: np.ndarray,
                         v_s: np.ndarray, a_s: np.ndarray, F_s: np.ndarray) -> BenchmarkErrors:
     """The benchmark's four relative errors [%] (``Simulation_EMPS.m``: simulated against the
@@ -148,8 +140,7 @@ def _uncertainty(fit: oe.OutputErrorFit, use: np.ndarray, h: float
                  ) -> tuple[Uncertainty, list[np.ndarray], float]:
     m = int(np.count_nonzero(use))
     tc = max(oe.correlation_time(fit.r[:m], h), oe.correlation_time(fit.r[m:], h))
-    block = max(BLOCK_CORR * tc, BLOCK_MIN_S)
-    block = min(block, max(m * h / MIN_CLUSTERS, h))  # at least MIN_CLUSTERS blocks if possible
+    block = oe.block_length(tc, m, h)
     clusters = oe.time_clusters(use, h, block)
     cov, cond, dof = covariance_clustered(fit.J, fit.r, clusters)
     return assess(fit.names, fit.x, cov, dof, cond), clusters, block
@@ -181,7 +172,7 @@ def _adequacy(record: PlantRecord, law: str, fit: oe.OutputErrorFit, F: np.ndarr
         motion=adq.by_motion(rF, v),
         correlation_time_s={"force": oe.correlation_time(fit.r[:m], record.h_s),
                             "position": oe.correlation_time(fit.r[m:], record.h_s)})
-    return adq.judge(a, len(clusters), MIN_CLUSTERS)
+    return adq.judge(a, len(clusters), oe.MIN_CLUSTERS)
 
 
 def _fit_law(law: str, record: PlantRecord, use: np.ndarray, plant_of: Callable,
@@ -270,7 +261,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
         start, fit, plant = _fit_law(law, record, use, plant_of, floors, settings.max_iter,
                                      progress, settings.free, prm)
         unc, clusters, block = _uncertainty(fit, use, record.h_s)
-        F, q, v, a = _kinematics(plant, fit.x, prm)
+        F, q, v, a = plant.motion(fit.x)
         adequacy = _adequacy(record, law, fit, F, q, use, clusters, block,
                              "rad/s" if cfg.axis == "rotary" else "m/s")
         laws[law] = LawFit(law, start, fit, unc, adequacy, len(clusters), block, F, q, v, a,
@@ -282,7 +273,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
     chosen, choice = choose_law(settings.law, laws)
     # the baseline: IDIM-LS of the symmetric law simulated in the same closed loop
     bplant = plant_of(LAW_TERMS["symmetric"])
-    bF, bq, bv, ba = _kinematics(bplant, baseline.theta, prm)
+    bF, bq, bv, ba = bplant.motion(baseline.theta)
     idx = np.flatnonzero(use)
     best = laws[chosen]
     errors = {"output error": benchmark_errors_on(record, idx, best.q, best.v, best.a, best.F),
@@ -319,9 +310,9 @@ def _split(settings: PlantSettings, record: PlantRecord, use: np.ndarray, law: s
     held = use & (np.arange(record.n) >= cut)
     start, fit, plant = _fit_law(law, record, fit_use, plant_of, floors, settings.max_iter,
                                  progress, settings.free, prm)
-    F, q, v, a = _kinematics(plant, fit.x, prm)
+    F, q, v, a = plant.motion(fit.x)
     base = idim_ls(sliced(record, fit_use), LAW_TERMS["symmetric"])
-    bF, bq, bv, ba = _kinematics(plant_of(LAW_TERMS["symmetric"]), base.theta, prm)
+    bF, bq, bv, ba = plant_of(LAW_TERMS["symmetric"]).motion(base.theta)
     hidx = np.flatnonzero(held)
     return {"share": settings.split, "t_split_s": float(record.t_s[cut]),
             "estimate": dict(zip(fit.names, map(float, fit.x), strict=True)),

@@ -39,10 +39,6 @@ from ema_cli.identify.plant.result import (
 from ema_cli.identify.plant.settings import PlantSettings
 from ema_cli.identify.uncertainty import Uncertainty, assess, covariance_clustered
 
-BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
-BLOCK_MIN_S = 0.25  # ... and at least this long [s]
-MIN_CLUSTERS = 20  # independent residual blocks a verdict needs [-]
-
 
 def _rows(record: PlantRecord, est: IdimEstimate) -> tuple[np.ndarray, np.ndarray]:
     """The decimated velocity and position at the regression's rows."""
@@ -53,19 +49,6 @@ def _rows(record: PlantRecord, est: IdimEstimate) -> tuple[np.ndarray, np.ndarra
     a, b = s.first_sample, record.n - s.drop_end
     r = s.decimation
     return matlab.decimate(kin.dq_m_s[a:b], r), matlab.decimate(kin.q_m[a:b], r)
-
-
-def row_clusters(n_rows: int, h_row: float, block_s: float) -> list[np.ndarray]:
-    """Contiguous blocks of ``block_s`` seconds of the regression's rows."""
-    per = max(int(round(block_s / h_row)), 1)
-    out: list[np.ndarray] = []
-    for a in range(0, n_rows, per):
-        b = min(a + per, n_rows)
-        if b - a < per // 2 and out:
-            out[-1] = np.concatenate([out[-1], np.arange(a, b)])
-        else:
-            out.append(np.arange(a, b))
-    return out
 
 
 def inverse_fit(record: PlantRecord, terms: tuple[str, ...], law: str, rotary: bool
@@ -79,9 +62,8 @@ def inverse_fit(record: PlantRecord, terms: tuple[str, ...], law: str, rotary: b
     e = est.residual_n
     h_row = reg.settings.decimation * record.h_s
     tc = oe.correlation_time(e, h_row)
-    block = max(BLOCK_CORR * tc, BLOCK_MIN_S)
-    block = min(block, max(e.size * h_row / MIN_CLUSTERS, h_row))
-    clusters = row_clusters(e.size, h_row, block)
+    block = oe.block_length(tc, e.size, h_row)
+    clusters = oe.time_blocks(e.size, h_row, block)
     J = -reg.W
     cov, cond, dof = covariance_clustered(J, e, clusters)
     unc = assess(est.names, est.theta, cov, dof, cond)
@@ -95,7 +77,7 @@ def inverse_fit(record: PlantRecord, terms: tuple[str, ...], law: str, rotary: b
                                   q_rows if rotary else None),
         ranges={"force": adq.failing_ranges(reg.t_s, e, block)},
         motion=adq.by_motion(e, v_rows), correlation_time_s={"force": tc})
-    adq.judge(a, len(clusters), MIN_CLUSTERS)
+    adq.judge(a, len(clusters), oe.MIN_CLUSTERS)
     fit = oe.OutputErrorFit(est.names, est.theta.copy(), e, J, (est.sigma_n, float("nan")), [],
                             0, True, "linear least squares on the decimated rows (IDIM-LS)")
     F = np.full(record.n, np.nan)

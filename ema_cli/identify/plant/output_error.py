@@ -279,20 +279,39 @@ def fit(plant: ClosedLoopPlant, ch: Channels, x0: np.ndarray, scale: np.ndarray,
     return OutputErrorFit(plant.names, x, r, J, s, hist, it, converged, status)
 
 
+MIN_CLUSTERS = 20  # independent residual blocks a verdict needs [-]
+BLOCK_CORR = 20.0  # residual blocks of at least this many correlation times [-]
+BLOCK_MIN_S = 0.25  # ... and at least this long [s]
+
+
+def block_length(corr_time_s: float, n: int, h_s: float) -> float:
+    """The length [s] of the residual blocks of a cluster-robust covariance over ``n``
+    samples every ``h_s``: :data:`BLOCK_CORR` correlation times and at least
+    :data:`BLOCK_MIN_S`, shortened to leave :data:`MIN_CLUSTERS` blocks when the record allows."""
+    block = max(BLOCK_CORR * corr_time_s, BLOCK_MIN_S)
+    return min(block, max(n * h_s / MIN_CLUSTERS, h_s))
+
+
+def time_blocks(n: int, h_s: float, block_s: float) -> list[np.ndarray]:
+    """Contiguous blocks of ``block_s`` seconds of ``n`` samples every ``h_s`` (index arrays;
+    a short tail joins the previous block)."""
+    per = max(int(round(block_s / h_s)), 1)
+    out: list[np.ndarray] = []
+    for a in range(0, n, per):
+        b = min(a + per, n)
+        if b - a < per // 2 and out:
+            out[-1] = np.concatenate([out[-1], np.arange(a, b)])
+        else:
+            out.append(np.arange(a, b))
+    return out
+
+
 def time_clusters(use: np.ndarray, h_s: float, block_s: float) -> list[np.ndarray]:
     """Clusters of the weighted residual vector ``[r_F, r_q]`` (both channels over the used
-    samples): contiguous time blocks of ``block_s`` seconds, each holding both channels'
+    samples): the :func:`time_blocks` of ``block_s`` seconds, each holding both channels'
     residuals of its samples."""
     m = int(np.count_nonzero(use))
-    per = max(int(round(block_s / h_s)), 1)
-    out = []
-    for a in range(0, m, per):
-        b = min(a + per, m)
-        if b - a < per // 2 and out:  # a short tail joins the previous block
-            out[-1] = np.concatenate([out[-1], np.arange(a, b), m + np.arange(a, b)])
-            continue
-        out.append(np.concatenate([np.arange(a, b), m + np.arange(a, b)]))
-    return out
+    return [np.concatenate([c, m + c]) for c in time_blocks(m, h_s, block_s)]
 
 
 def correlation_time(r: np.ndarray, h_s: float, max_lag: int | None = None) -> float:

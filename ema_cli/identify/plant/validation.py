@@ -23,7 +23,6 @@ from ema_cli.identify.plant.fit import (
     SAMPLE_TOL,
     PlantFit,
     _description,
-    _kinematics,
     _plant,
     benchmark_errors_on,
 )
@@ -114,7 +113,7 @@ def validate_models(settings: PlantSettings, delay: int, models: Mapping[str, Ma
     for name, est in models.items():
         terms = tuple(est)
         plant = _plant(settings, base, resolve, prm, record, extras, delay, terms)
-        F, q, v, a = _kinematics(plant, np.array([est[t] for t in terms]), prm)
+        F, q, v, a = plant.motion(np.array([est[t] for t in terms]))
         out[name] = benchmark_errors_on(record, idx, q, v, a, F)
         rms[name] = float(np.sqrt(np.mean((q[idx] - record.q_m[idx]) ** 2)))
         sims[name] = {"F": F, "q": q, "v": v, "a": a}
