@@ -35,6 +35,8 @@ class Stop(Exception):
     ["tune", "configs/tune.yaml"],
     ["sensitivity", "configs/sensitivity.yaml", "--n", "8", "--method", "morris"],
     ["reproduce", "experiments/paper2020.yaml"],
+    ["threshold", "configs/deadzone2.yaml", "--vary", "deadzone2", "--range", "0.001", "0.1",
+     "--metric", "p2p_err_pos_deg", "--limit", "0.002"],
 ], ids=lambda a: a[0])
 def test_a_long_command_prints_its_estimate_first(monkeypatch, tmp_path, args):
     said: list[str] = []
