@@ -75,7 +75,8 @@ class Threshold:
         from ema_cli.model.nonlinearities import lookup
 
         pl = lookup(self.vary)
-        return (f"{self.config.name}: threshold of {self.vary} ({pl.type} @ {pl.location}), "
+        return (f"{self.config.name} ({self.config.actuator_label()}): threshold of "
+                f"{self.vary} ({pl.type} @ {pl.location}), "
                 f"{self.input}")
 
     def plot(self) -> Figure:
