@@ -65,17 +65,24 @@ def announce_estimate(seconds: float, what: str, force: bool = False) -> None:
     total = _timing.get("estimated_s", 0.0) + float(seconds)
     _timing["estimated_s"] = total
     _timing.setdefault("estimate_of", []).append(what)
-    if total > ESTIMATE_MIN_S or force:
+    if (total > ESTIMATE_MIN_S and seconds > 0) or force:  # a part that adds nothing: quiet
         _timing["announced"] = True
         announce(f"estimated time {duration(total)}: {what}")
 
 
-def announce_whole_estimate(seconds: float, what: str) -> None:
-    """:func:`announce_estimate` of a command that runs other commands' computations (``ema
-    design``: an identification, a tuning, a battery): its estimate counts them all, so their
-    own estimates are not added or announced again."""
-    announce_estimate(seconds, what)
+@contextlib.contextmanager
+def whole_estimate(seconds: float, what: str, force: bool = False) -> Iterator[None]:
+    """:func:`announce_estimate` for a computation made of other commands' computations (``ema
+    design``: an identification, a tuning, a battery; ``ema sensitivity``: a sweep per input):
+    its estimate counts them all, so inside the block their own estimates are neither added
+    nor announced again."""
+    announce_estimate(seconds, what, force)
+    previous = _timing.get("whole", False)
     _timing["whole"] = True
+    try:
+        yield
+    finally:
+        _timing["whole"] = previous
 
 
 def timing() -> dict[str, Any]:

@@ -282,18 +282,27 @@ def _design(log: str | Path, config: ConfigSource, overrides: Overrides,
             corners: str, stage: Callable[[str], None] | None,
             tune_log: Callable[[str], None] | None) -> DesignResult:
     """:func:`design` on the current executor."""
-    from ema_cli.api.identify_logs import identify_closed_loop
-    from ema_cli.api.tune import tune
-    from ema_cli.report.log_identify_report import fitted_config
+    from ema_cli.progress import whole_estimate
 
     say = stage or (lambda _text: None)
     t_all = time.perf_counter()
     log = Path(log)
     plan = _checked_inputs(log, config, overrides, tune_config, spec, budget, corners)
+    timings: dict[str, float] = {}
+    with whole_estimate(*_estimate(plan, budget)):  # the steps' own estimates are inside it
+        return _steps(log, plan, budget, corners, say, tune_log, timings, t_all)
+
+
+def _steps(log: Path, plan: dict[str, Any], budget: int | None, corners: str,
+           say: Callable[[str], None], tune_log: Callable[[str], None] | None,
+           timings: dict[str, float], t_all: float) -> DesignResult:
+    """The three steps of :func:`design` (identification, tuning, sign-off) -> the result."""
+    from ema_cli.api.identify_logs import identify_closed_loop
+    from ema_cli.api.tune import tune
+    from ema_cli.report.log_identify_report import fitted_config
+
     cfg, tune_path, spec_path, pairs = plan["cfg"], plan["tune_path"], plan["spec_path"], \
         plan["pairs"]
-    timings: dict[str, float] = {}
-    _announce_estimate(plan, budget)
 
     say(f"1/3 identification of {log}")
     t0 = time.perf_counter()
@@ -339,12 +348,13 @@ def _design(log: str | Path, config: ConfigSource, overrides: Overrides,
     return res
 
 
-def _announce_estimate(plan: dict[str, Any], budget: int | None) -> float:
-    """Announce the estimated time of the whole design (before the identification): the fit
+def _estimate(plan: dict[str, Any], budget: int | None) -> tuple[float, str]:
+    """The estimated time [s] of the whole design and what it counts (announced before the
+    identification; the steps' own estimates are not added again): the fit
     (``api.identify_logs.fit_estimate``), the tuning (its evaluations x its scenarios and the
     spec's tests the search measures per candidate) and the nominal sign-off (the battery's
     integration steps); the corners run only while they can change the verdict and are not
-    counted -> the estimate [s]."""
+    counted."""
     from ema_cli.api.identify_logs import fit_estimate
     from ema_cli.config.acceptance import AcceptanceSpec
     from ema_cli.config.loader import load_config
@@ -352,7 +362,7 @@ def _announce_estimate(plan: dict[str, Any], budget: int | None) -> float:
     from ema_cli.identify.closed_loop.problem import load_log
     from ema_cli.identify.log_settings import ClosedLoopSettings
     from ema_cli.limits import cores
-    from ema_cli.progress import announce_whole_estimate, duration, kernel_seconds
+    from ema_cli.progress import duration, kernel_seconds
     from ema_cli.tune.run import evaluations_for
     from ema_cli.tune.spec import SEARCH_KINDS
 
@@ -372,12 +382,10 @@ def _announce_estimate(plan: dict[str, Any], budget: int | None) -> float:
     workers = cores()
     tune_s = kernel_seconds(evals * per_candidate, 1, workers)
     sign_s = kernel_seconds(battery, 1, workers)
-    total = fit_s + tune_s + sign_s
-    announce_whole_estimate(total, f"identification {duration(fit_s)}, tuning "
-                            f"{duration(tune_s)} ({evals:,} evaluations), sign-off "
-                            f"{duration(sign_s)} (the nominal case; corners only while they "
-                            "can change the verdict)")
-    return total
+    return fit_s + tune_s + sign_s, (
+        f"identification {duration(fit_s)}, tuning {duration(tune_s)} ({evals:,} "
+        f"evaluations), sign-off {duration(sign_s)} (the nominal case; corners only while "
+        "they can change the verdict)")
 
 
 def _checked_inputs(log: Path, config: ConfigSource, overrides: Overrides,

@@ -249,7 +249,7 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
                        "of it with window (T0, T1) [s], or raise dt_s") from None
 
 
-FIT_PASSES_PER_START = 400.0
+FIT_PASSES_PER_START = 440.0
 """Kernel work of a multiple-shooting fit, in passes over the whole log at ``dt_s`` per start
 (the lengthening stages, Jacobians, intervals and profile included), measured on the README's
 4 s example (`ema identify --make-data closed-loop --noise 1`, then the fit; the figure and

@@ -25,7 +25,7 @@ from ema_cli.config.run import InputConfig, RunConfig
 from ema_cli.config.sensitivity import SensitivityConfig, check_sobol_n
 from ema_cli.config.study import StudyConfig
 from ema_cli.errors import EmaError
-from ema_cli.progress import BIG_RUN, announce_estimate, kernel_seconds
+from ema_cli.progress import BIG_RUN, kernel_seconds, whole_estimate
 from ema_cli.sensitivity.analyze import check_output, convergence, empty_table, indices
 from ema_cli.sensitivity.sampling import Design, FactorRange, sample
 from ema_cli.sweep.run import DIVERGED, OK, SweepResult, compute_sweep
@@ -266,28 +266,29 @@ def compute_sensitivity(
     sim = studies[0][2].simulation
     workers = resolve_workers(n_jobs if n_jobs is not None else cfg.parallel.n_jobs)
     steps = round(sim.duration_s / sim.dt_s)
-    announce_estimate(kernel_seconds(total, steps, workers),
-                      f"{total:,} simulations of {steps:,} steps on {workers} core"
-                      f"{'s' if workers != 1 else ''} in all: {len(studies)} input(s) x "
-                      f"{design.n_rows:,} ({method}, n = {n}; --n sets it; cached samples are "
-                      "skipped)", force=total > BIG_RUN)
+    whole = whole_estimate(kernel_seconds(total, steps, workers),
+                           f"{total:,} simulations of {steps:,} steps on {workers} core"
+                           f"{'s' if workers != 1 else ''} in all: {len(studies)} input(s) x "
+                           f"{design.n_rows:,} ({method}, n = {n}; --n sets it; cached "
+                           "samples are skipped)", force=total > BIG_RUN)
     aborted = True
     try:
-        for name, inp, study in studies:
-            if log is not None:
-                log(f"input {name}: {design.n_rows:,} runs ({method}, n = {n})")
-            t1 = time.perf_counter()
-            sw = compute_sweep(study, n_jobs, backend, force, progress, scheduler=scheduler,
-                               cache_dir=cache_dir, base_dir=base_dir, source=source,
-                               keep_signals=False)
-            t2 = time.perf_counter()
-            run = InputRun(name, inp, sw)
-            analyse(run, design, cfg)
-            result.inputs.append(run)
-            result.timings[f"{name}.sweep"] = t2 - t1
-            result.timings[f"{name}.analysis"] = time.perf_counter() - t2
-            for k in ("plan", "kernel", "execute", "lookup", "store"):
-                result.timings[f"{name}.{k}"] = sw.timings.get(k, 0.0)
+        with whole:  # the sweeps' own estimates are inside this one
+            for name, inp, study in studies:
+                if log is not None:
+                    log(f"input {name}: {design.n_rows:,} runs ({method}, n = {n})")
+                t1 = time.perf_counter()
+                sw = compute_sweep(study, n_jobs, backend, force, progress,
+                                   scheduler=scheduler, cache_dir=cache_dir,
+                                   base_dir=base_dir, source=source, keep_signals=False)
+                t2 = time.perf_counter()
+                run = InputRun(name, inp, sw)
+                analyse(run, design, cfg)
+                result.inputs.append(run)
+                result.timings[f"{name}.sweep"] = t2 - t1
+                result.timings[f"{name}.analysis"] = time.perf_counter() - t2
+                for k in ("plan", "kernel", "execute", "lookup", "store"):
+                    result.timings[f"{name}.{k}"] = sw.timings.get(k, 0.0)
         aborted = False
     except KeyboardInterrupt:
         result.interrupted = True

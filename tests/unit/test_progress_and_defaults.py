@@ -278,3 +278,18 @@ def test_sweep_overlay_says_which_curves_lie_on_each_other_and_keeps_legend_belo
     fig.canvas.draw()
     (leg,) = fig.legends
     assert leg.get_window_extent().y1 <= min(ax.get_window_extent().y0 for ax in fig.axes)
+
+
+def test_a_whole_estimate_counts_its_parts_once_and_a_part_of_nothing_is_quiet():
+    """A command made of other computations (design, sensitivity) announces one estimate; the
+    parts it runs neither add to it nor announce again; after the block they count again; a
+    part that adds nothing (every job cached) says nothing."""
+    said: list[str] = []
+    with progress.reporting(None, said.append):
+        with progress.whole_estimate(100.0, "the whole"):
+            progress.announce_estimate(50.0, "a part inside")
+        assert progress.timing()["estimated_s"] == 100.0
+        progress.announce_estimate(0.0, "a cached part")
+        progress.announce_estimate(30.0, "a part after")
+        assert progress.timing()["estimated_s"] == 130.0
+    assert said == ["estimated time ~2 min: the whole", "estimated time ~2 min: a part after"]
