@@ -171,8 +171,8 @@ def test_a_fit_that_misses_the_noise_level_says_so():
     standard errors as the whole story. (The multiple-shooting search at a small budget: 2
     starts, 10 joint iterations, no lengthening, the contact law stated, no whole-log polish;
     the warning comes from the fit's own residuals, whatever the budget: the default budget
-    took 37 s here for the same verdict.)"""
-    syn = closed_loop_log(PLANT, 1.0, 0, duration_s=DURATION_S)
+    took 37 s here for the same verdict, on a 2 s log.)"""
+    syn = closed_loop_log(PLANT, 1.0, 0, duration_s=1.0)
     settings = ClosedLoopSettings(plant={**PLANT, "JL": 0.013}, free=narrow(syn.truth),
                                   free_contact=False, polish=False, profile_points=5,
                                   shooting={"starts": 2, "max_iter": 10, "lengthen_s": []})

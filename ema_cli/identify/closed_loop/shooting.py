@@ -327,18 +327,6 @@ class ShootingProblem:
             self._plans["gather"] = (owner, local)
         return self._plans["gather"]
 
-    def _owned_starts(self) -> np.ndarray | None:
-        """The first log sample each segment owns, when each owns a non-empty run of samples
-        in order (the sums of :meth:`normal_equations` by ``np.add.reduceat``); else None."""
-        if "owned_starts" not in self._plans:
-            N = self.base.log.n
-            starts = np.array([self.seg.data_range(k, N).start for k in range(self.seg.n)])
-            stops = np.array([self.seg.data_range(k, N).stop for k in range(self.seg.n)])
-            ok = (starts[0] == 0 and stops[-1] == N and np.all(stops > starts)
-                  and np.all(starts[1:] == stops[:-1]))
-            self._plans["owned_starts"] = starts if ok else None
-        return self._plans["owned_starts"]
-
     def _data_residuals(self, Y: np.ndarray) -> np.ndarray:
         """Weighted data residuals [n_cand, n_ch, N] of candidates whose segment predictions
         are ``Y[n_cand*n_seg, n_ch, L]`` (candidate after candidate)."""
@@ -427,33 +415,19 @@ class ShootingProblem:
         g = np.zeros(self.n_vars)
         A[:p, :p] = Jx.T @ Jx
         g[:p] = Jx.T @ r
-        starts = self._owned_starts()
-        if starts is not None:  # every segment's samples contiguous: sums over them at once
-            n_ch = len(self.base.channels)
-            N = self.base.log.n
-            jsd = Js[:nd].reshape(n_ch, N, NV)
-            jxd = Jx[:nd].reshape(n_ch, N, p)
-            rd = r[:nd].reshape(n_ch, N)
-            Ass = np.add.reduceat(np.einsum("cik,cil->ikl", jsd, jsd), starts, axis=0)
-            Aps = np.add.reduceat(np.einsum("cij,cik->ijk", jxd, jsd), starts, axis=0)
-            gs = np.add.reduceat(np.einsum("cik,ci->ik", jsd, rd), starts, axis=0)
-            for k in range(n):
-                c = slice(p + k * NV, p + (k + 1) * NV)
-                A[c, c] = Ass[k]
-                A[:p, c] = Aps[k]
-                A[c, :p] = Aps[k].T
-            g[p:] = gs.ravel()
-        else:
-            owner_all = np.full(r.shape[0], -1)
-            owner_all[:nd] = np.tile(self._gather()[0], len(self.base.channels))
-            for k in range(n):
-                rows = owner_all == k
-                c = slice(p + k * NV, p + (k + 1) * NV)
-                jk = Js[rows]
-                A[c, c] = jk.T @ jk
-                A[:p, c] = Jx[rows].T @ jk
-                A[c, :p] = A[:p, c].T
-                g[c] = jk.T @ r[rows]
+        # the sums over each segment's samples (a run in order, every channel) at once
+        n_ch, N = len(self.base.channels), self.base.log.n
+        jsd, rd = Js[:nd].reshape(n_ch, N, NV), r[:nd].reshape(n_ch, N)
+        at = self.seg.first  # the first sample each segment owns (Segments.data_range)
+        Ass = np.add.reduceat(np.einsum("cik,cil->ikl", jsd, jsd), at, axis=0)
+        Aps = np.add.reduceat(np.einsum("cij,cik->ijk", Jx[:nd].reshape(n_ch, N, p), jsd), at,
+                              axis=0)
+        g[p:] = np.add.reduceat(np.einsum("cik,ci->ik", jsd, rd), at, axis=0).ravel()
+        for k in range(n):
+            c = slice(p + k * NV, p + (k + 1) * NV)
+            A[c, c] = Ass[k]
+            A[:p, c] = Aps[k]
+            A[c, :p] = Aps[k].T
         if r.shape[0] > nd:
             if v is None:
                 raise ValueError("normal_equations: the tie residuals need the candidate v")
