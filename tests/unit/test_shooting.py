@@ -653,3 +653,41 @@ def test_when_the_longest_segments_do_not_fit_the_estimate_falls_back_to_the_anc
     assert sh["lengthened_to_s"] == [0.1] and "refine_anchor" in sh["stage_iterations"]
     assert js["optimum"]["confirmed"] is True, js["optimum"]
     assert abs(js["error_pct_vs_truth"]["kL"]) < 1.0, js["error_pct_vs_truth"]
+
+
+@pytest.mark.parametrize(("confirmed", "adequate", "ridge", "moved", "restarts", "concludes"), [
+    (True, True, True, True, 0, 1),  # confirmed and adequate: no restart, however it sits
+    (False, True, True, True, 1, 2),  # not confirmed on the ridge: restarted, concluded again
+    (True, False, True, False, 1, 1),  # not adequate on the ridge, the restart moved nothing
+    (False, False, False, True, 0, 1),  # not on the jump law's ridge: nothing to restart
+])
+def test_the_contact_restart_runs_only_when_the_verdict_needs_it(
+        monkeypatch, confirmed, adequate, ridge, moved, restarts, concludes):
+    """The contact restart (other ramp-in times of the contact law) runs only for a candidate
+    on the jump law's ridge whose fit, concluded without it, is not confirmed or not
+    adequate; the fit is concluded again only when a restart moved a candidate, and that
+    second conclusion is the answer."""
+    from types import SimpleNamespace
+
+    import ema_cli.identify.closed_loop.shooting_fit as sf
+
+    calls = {"restart": 0, "conclude": 0}
+
+    def conclude(problem, cands, **kw):
+        calls["conclude"] += 1
+        return SimpleNamespace(confirmed=confirmed, which=calls["conclude"], polish=None)
+
+    def restart(cands, dt, iters):
+        calls["restart"] += 1
+        return moved
+
+    monkeypatch.setattr(sf, "search", lambda *a, **k: SimpleNamespace(iterations=1))
+    monkeypatch.setattr(sf, "candidates", lambda found: [found])
+    monkeypatch.setattr(sf, "on_jump_ridge", lambda c: ridge)
+    monkeypatch.setattr(sf, "adequate", lambda *a: adequate)
+    monkeypatch.setattr(sf, "conclude", conclude)
+    monkeypatch.setattr(sf, "restart_contact", restart)
+    out = sf.shooting_estimate(None, {}, n_starts=2, segment_s=0.05, dt_search=5e-5, seed=0,
+                               max_iter=1, polish_iter=0)
+    assert calls == {"restart": restarts, "conclude": concludes}
+    assert out.which == concludes  # the last conclusion is the answer
