@@ -60,12 +60,22 @@ def announce_estimate(seconds: float, what: str, force: bool = False) -> None:
     ``timing``) and, when the total is above :data:`ESTIMATE_MIN_S`, :func:`announce` it:
     ``estimated time ~3 min: 98,304 simulations of 100,000 steps on 2 cores`` (``force``:
     whatever the time)."""
+    if _timing.get("whole"):  # the command announced its whole estimate: parts say nothing
+        return
     total = _timing.get("estimated_s", 0.0) + float(seconds)
     _timing["estimated_s"] = total
     _timing.setdefault("estimate_of", []).append(what)
     if total > ESTIMATE_MIN_S or force:
         _timing["announced"] = True
         announce(f"estimated time {duration(total)}: {what}")
+
+
+def announce_whole_estimate(seconds: float, what: str) -> None:
+    """:func:`announce_estimate` of a command that runs other commands' computations (``ema
+    design``: an identification, a tuning, a battery): its estimate counts them all, so their
+    own estimates are not added or announced again."""
+    announce_estimate(seconds, what)
+    _timing["whole"] = True
 
 
 def timing() -> dict[str, Any]:

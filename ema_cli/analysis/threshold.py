@@ -58,6 +58,24 @@ def _grid(lo: float, hi: float, n: int, log: bool) -> np.ndarray:
     return np.geomspace(lo, hi, n) if log else np.linspace(lo, hi, n)
 
 
+def expected_rounds(lo: float, hi: float, log: bool = True, rtol: float = DEFAULT_RTOL,
+                    grid_points: int = GRID_POINTS, max_rounds: int = MAX_ROUNDS) -> int:
+    """The refinement rounds :func:`find_threshold` runs when the threshold lies inside
+    [lo, hi] (one when every magnitude passes or none does): each round narrows the bracket to
+    one of its ``grid_points - 1`` intervals until its relative width is at most ``rtol``
+    (linear grids: taken relative to the middle of the range)."""
+    if log:
+        width = math.log(hi / lo)
+        needed = -math.log1p(-rtol)  # log-width whose relative width is rtol
+    else:
+        width = (hi - lo) / max(abs(hi + lo) / 2, 1e-300)
+        needed = rtol
+    rounds = 1
+    while width / (grid_points - 1) ** rounds > needed and rounds < max_rounds:
+        rounds += 1
+    return rounds
+
+
 def find_threshold(
     evaluate: Callable[[np.ndarray], pd.DataFrame],
     criteria: Sequence[Criterion],

@@ -74,7 +74,7 @@ class AcceptanceResult:
 
     @property
     def title(self) -> str:
-        return f"{self.spec.name}: actuator acceptance"
+        return f"{self.spec.name}: acceptance ({self.spec.actuator.label()})"
 
     @property
     def metrics(self) -> pd.DataFrame:

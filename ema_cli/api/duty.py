@@ -72,7 +72,7 @@ class DutyResult:
 
     @property
     def title(self) -> str:
-        return f"{self.profile.name}: duty"
+        return f"{self.profile.name}: duty ({self.profile.actuator.label()})"
 
     @property
     def metrics(self) -> pd.DataFrame:

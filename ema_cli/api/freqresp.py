@@ -144,7 +144,8 @@ class FrequencyResponse:
 
     @property
     def title(self) -> str:
-        return f"{self.config.name}: frequency response of the load angle (sinestream)"
+        return (f"{self.config.name} ({self.config.actuator_label()}): frequency "
+                "response of the load angle (sinestream)")
 
     def plot(self) -> Figure:
         """Bode plot: one curve per amplitude, the linear model dashed."""

@@ -235,6 +235,9 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
                            "bytes); read a part of it with window (T0, T1) [s]") from None
         check_log_steps(cfg, log.duration, str(cfg.data))
         check_log_span(cfg, log, str(cfg.data))
+        from ema_cli.progress import announce_estimate
+
+        announce_estimate(*fit_estimate(cfg, log.duration))
     from ema_cli.sweep.executor import executing
 
     try:
@@ -245,6 +248,44 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
                 else "the log")
         raise EmaError(f"out of memory fitting {what} at dt_s = {cfg.dt_s:g} s: fit a part "
                        "of it with window (T0, T1) [s], or raise dt_s") from None
+
+
+FIT_PASSES_PER_START = 400.0
+"""Kernel work of a multiple-shooting fit, in passes over the whole log at ``dt_s`` per start
+(the lengthening stages, Jacobians, intervals and profile included), measured on the README's
+4 s example (`ema identify --make-data closed-loop --noise 1`, then the fit; the figure and
+its date in docs/identification.md)."""
+FIT_OVERHEAD = 2.0
+"""A fit's wall time over its kernel time on 2 idle cores (the least-squares algebra of the
+segments, the verdict's checks), measured on the same example."""
+
+
+def fit_estimate(cfg: Any, duration: float, workers: int | None = None) -> tuple[float, str]:
+    """The estimated time [s] of a closed-loop fit of a ``duration`` [s] log with settings
+    ``cfg`` (``ClosedLoopSettings``) and what it counts: the kernel work at
+    ``progress.CPU_S_PER_STEP`` (``FIT_PASSES_PER_START`` passes over the log per shooting
+    start; the GA search: its population times generations at ``ga_dt_s``, then the polish),
+    times ``FIT_OVERHEAD``."""
+    from ema_cli.limits import cores
+    from ema_cli.progress import kernel_seconds
+
+    workers = cores() if workers is None else workers
+    steps = duration / cfg.dt_s
+    if cfg.search == "shooting":
+        passes = FIT_PASSES_PER_START * cfg.shooting.starts
+        lane_steps = passes * steps
+        what = (f"a closed-loop fit of the {duration:.3g} s log: {cfg.shooting.starts} starts, "
+                f"about {passes:,.0f} passes of {steps:,.0f} steps on {workers} core"
+                f"{'s' if workers != 1 else ''}")
+    else:
+        ga_steps = duration / (cfg.ga_dt_s or cfg.dt_s)
+        n_ga = cfg.ga.pop * cfg.ga.generations
+        passes = FIT_PASSES_PER_START
+        lane_steps = n_ga * ga_steps + passes * steps
+        what = (f"a closed-loop fit of the {duration:.3g} s log: GA {n_ga:,} simulations of "
+                f"{ga_steps:,.0f} steps, then about {passes:,.0f} passes of {steps:,.0f} steps "
+                f"on {workers} core{'s' if workers != 1 else ''}")
+    return FIT_OVERHEAD * kernel_seconds(lane_steps, 1, workers), what
 
 
 def check_log_steps(cfg: Any, duration: float, source: str) -> None:

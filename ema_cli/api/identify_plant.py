@@ -196,7 +196,11 @@ def identify_plant(data: str | Path | None = None, actuator: str | Path | None =
     s = plant_settings(config, overrides, data=None if data is None else str(data),
                        actuator=None if actuator is None else str(actuator), **settings)
     fit = run_plant(s, progress)
-    v = validate(fit, s.validate_data) if s.validate_data else None
+    v = None
+    if s.validate_data:
+        if progress is not None:
+            progress(f"validation on {Path(s.validate_data).name}", None, None)
+        v = validate(fit, s.validate_data)
     return PlantIdentification(fit, v)
 
 

@@ -65,7 +65,8 @@ class LoopMargins:
 
     @property
     def title(self) -> str:
-        return f"{self.config.name}: open loops of the linear limit"
+        return (f"{self.config.name} ({self.config.actuator_label()}): open loops of "
+                "the linear limit")
 
     def plot(self) -> Figure:
         """Bode and Nichols plots of both open loops, margins marked."""

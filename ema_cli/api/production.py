@@ -70,7 +70,7 @@ class YieldResult:
 
     @property
     def title(self) -> str:
-        return f"{self.plan.spec.name}: production yield"
+        return f"{self.plan.spec.name}: production yield ({self.plan.spec.actuator.label()})"
 
     @property
     def metrics(self) -> pd.DataFrame:

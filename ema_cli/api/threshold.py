@@ -75,7 +75,8 @@ class Threshold:
         from ema_cli.model.nonlinearities import lookup
 
         pl = lookup(self.vary)
-        return (f"{self.config.name}: threshold of {self.vary} ({pl.type} @ {pl.location}), "
+        return (f"{self.config.name} ({self.config.actuator_label()}): threshold of "
+                f"{self.vary} ({pl.type} @ {pl.location}), "
                 f"{self.input}")
 
     def plot(self) -> Figure:
@@ -186,6 +187,15 @@ def threshold(
     nls = {k: v for k, v in cfg.nonlinearities.items() if k != vary}
     ev = simulation_evaluator(vary, cfg.plant_overrides(), nls, signal, cfg.simulation.duration_s,
                               cfg.simulation.dt_s, cfg.friction_reading)
+    from ema_cli.analysis.threshold import GRID_POINTS, expected_rounds
+    from ema_cli.limits import cores
+    from ema_cli.progress import announce_size
+    from ema_cli.sim.runner import plan_steps
+
+    rounds = expected_rounds(lo, hi, log, rtol)
+    announce_size(rounds * GRID_POINTS, plan_steps(cfg.simulation.duration_s,
+                                                   cfg.simulation.dt_s, None)[0], cores(),
+                  f"{rounds} rounds of {GRID_POINTS} magnitudes to a bracket of {rtol:g}")
     t0 = time.perf_counter()
     res = find_threshold(ev, criteria, lo, hi, direction,  # type: ignore[arg-type]
                          log=log, rtol=rtol)

@@ -60,7 +60,8 @@ class TuneResult:
 
     @property
     def title(self) -> str:
-        return f"{self.config.name}: tuning ({self.outcome.method_label})"
+        return (f"{self.config.name}: tuning ({self.outcome.method_label}) on the "
+                f"{self.config.actuator.label()}")
 
     @property
     def verdict(self) -> str | None:

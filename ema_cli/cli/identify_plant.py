@@ -4,6 +4,7 @@ record. Heavy imports inside the functions."""
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -145,7 +146,7 @@ def plant(
            free)
 
 
-@handle_errors
+@functools.partial(handle_errors, label="identify")
 def _plant(data: Path, actuator: Path, config: Path | None, columns: list[str] | None,
            law: str | None, delay: str | None, window: str | None, split: float | None,
            validate: Path | None, set_: list[str] | None, out: Path | None,
@@ -157,9 +158,6 @@ def _plant(data: Path, actuator: Path, config: Path | None, columns: list[str] |
              *_pairs(columns, set_, law, delay, window, split, validate, free)]
     settings = plant_settings(config, pairs)
     check_output(out, "identify", plant_inputs(settings))
-    report_stage("reading the record, checking the controller, IDIM-LS"
-                 + (f"; validation on {Path(settings.validate_data).name}"
-                    if settings.validate_data else ""))
     # through the API (cli -> api -> compute), which runs the fit and the validation
     ident = identify_plant(config=config, overrides=pairs, progress=report_stage)
     report_stage("writing files and figures")
@@ -177,7 +175,7 @@ def validate_cmd(
     _validate(folder, data, columns)
 
 
-@handle_errors
+@functools.partial(handle_errors, label="identify")
 def _validate(folder: Path, data: Path, columns: list[str] | None) -> None:
     from ema_cli.api.identify_plant import validate_folder
 

@@ -73,6 +73,14 @@ class ActuatorSpec(Strict):
         return ([(f"plant.{k}", v) for k, v in self.plant.items()]
                 + [(f"nonlinearities.{k}", v) for k, v in self.nonlinearities.items()])
 
+    def label(self) -> str:
+        """The actuator under test in a reader's words (figure titles): the run config's file
+        stem, or the reference EMA, with the plant parameters set on it."""
+        from ema_cli.config.run import actuator_label
+
+        return actuator_label(None if self.config is None else Path(self.config).stem,
+                              list(self.plant))
+
     def source(self, here: Path | None, owner: str) -> tuple[Path | None, Path | None]:
         """(the run config file or None for the defaults, the folder its relative paths are
         read from); ``here`` the folder of the ``owner`` file that names it. Raises EmaError

@@ -322,6 +322,12 @@ class RunConfig(Strict):
             out["q_speed"] = self.sensors.speed_resolution_rpm * RPM
         return out
 
+    def actuator_label(self) -> str:
+        """The actuator that runs, for figure titles (:func:`actuator_label`)."""
+        desc = self.actuator
+        return actuator_label(None if desc is None else (desc.name or f"{desc.axis} actuator"),
+                              list(self.plant))
+
     def describe_options(self) -> str:
         """The option sections in use, for titles and reports ('' when none)."""
         parts = []
@@ -453,3 +459,14 @@ def bools_to_words(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: bools_to_words(v) for k, v in value.items()}
     return value
+
+
+def actuator_label(described: str | None, overrides: list[str]) -> str:
+    """The actuator that runs, in a reader's words (figure titles): a description's name, or
+    the reference EMA (the paper's) with the plant parameters set on it, e.g. ``reference EMA
+    with kL, alpha, Fc +3 set``."""
+    base = described or "reference EMA"
+    if not overrides:
+        return base
+    names = ", ".join(overrides[:3]) + (f" +{len(overrides) - 3}" if len(overrides) > 3 else "")
+    return f"{base} with {names} set"

@@ -43,13 +43,13 @@ B_PRIMED = B_XV + 1  # 1 once the history holds real samples (the first sample f
 BUFFER = B_PRIMED + 1  # rows of one lane's buffer
 
 
-@njit(cache=True, forceinline=True, error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy", entry=True)
 def filter_coefficient_nb(fc, ts):
     """``a = exp(-2 pi fc Ts)`` of the velocity low-pass (0 for ``fc = 0``: no filter)."""
     return math.exp(-2.0 * math.pi * fc * ts) if fc > 0.0 else 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def discrete_sample_nb(buf, q, v_sensor, r, ts, kp, ki, vmax, kv, kvi, umax, vsrc, ndiff,
                        taps, a_vf, delay):
     """One sample of the cascade (module docstring): update the buffer ``buf[BUFFER]`` in place

@@ -109,7 +109,7 @@ def time_constants(p: Mapping[str, float]) -> tuple[float, float]:
     return -1.0 / lam_fast, -1.0 / lam_slow
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def flow_nb(a11, a12, a21, a22, b1, b2, h):
     """The exact flow of ``dx/dt = A x + b`` over ``h`` [s] for a 2x2 ``A`` with real distinct
     eigenvalues (every two-node network: ``a12*a21 > 0``) -> ``(E, f)`` as six numbers

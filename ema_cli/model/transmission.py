@@ -88,7 +88,7 @@ def shaft_torque_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw, hw):
     return clamped if (contact and alpha > 0.0) else t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def shaft_torque_array_nb(kL, alpha, c, contact, inv_tau, hc, hck, dth, dw, out):
     """:func:`shaft_torque_nb` (the exact law, ``hw = 0``) over arrays ``dth[n]``, ``dw[n]``
     into ``out[n]`` [N*m]."""
@@ -160,7 +160,7 @@ def dahl_path(dth: np.ndarray, Fc_t: float, sigma_t: float, f0: float = 0.0) -> 
     return _dahl_path_nb(dth, float(Fc_t), float(sigma_t), float(f0), out)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def _dahl_path_nb(dth, Fc_t, sigma_t, f0, out):
     f = f0
     out[0] = f

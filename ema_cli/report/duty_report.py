@@ -111,7 +111,7 @@ def temperature_figure(res: Any) -> Figure:
     del t0
     ax.set_xlabel(f"time [{unit}]")
     ax.set_ylabel("temperature [degC]")
-    ax.set_title(f"{res.profile.name}: winding and housing temperature "
+    ax.set_title(f"{res.title}: winding and housing temperature "
                  f"(peak {res.run.thermal.peak_w - ZERO_CELSIUS:.1f} degC)")
     ax.grid(True, alpha=0.3)
     legend_outside(ax)
@@ -168,7 +168,7 @@ def envelope_figure(res: Any) -> Figure:
     axes[0].set_title("the whole envelope")
     axes[1].set_title("the operating points")
     use = 100.0 * res.run.stats.envelope_use
-    fig.suptitle(f"{res.profile.name}: operating points against the drive's torque-speed "
+    fig.suptitle(f"{res.title}: operating points against the drive's torque-speed "
                  f"envelope (at most {use:.3g} % of it used)")
     legend_outside(axes[1])
     fig.tight_layout()

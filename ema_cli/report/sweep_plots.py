@@ -144,7 +144,8 @@ def _overlays(result: SweepResult, df: pd.DataFrame, info: AxisInfo,
                 series.append((label, result.timeseries(int(i))))
             others = "" if zip_mode else _others_label(result, int(idx[0]), info.index)
             per = "run" if zip_mode else info.name
-            title = (f"{plan.cfg.name}: {what} of position and velocity, one curve per {per}"
+            who = f"{plan.cfg.name} ({plan.cfg.actuator_label()})"
+            title = (f"{who}: {what} of position and velocity, one curve per {per}"
                      f"{' (' + tag + ')' if tag else ''}\ninput: {plan.signal.describe()}"
                      f"{'; ' + others if others else ''}\n{info.description}")
             from ema_cli.report.sweep_figures import overlay_figure  # matplotlib: lazily
@@ -186,11 +187,12 @@ def _metric_plots(result: SweepResult, df: pd.DataFrame,
     x_label = info.name + (f" [{info.unit}]" if info.unit else "")
     if info.unit == "%":
         x_label = "dead-zone half-width [% of the baseline's peak signal]"
-    title = f"{plan.cfg.name}: metrics vs {info.name}\ninput: {plan.signal.describe()}; " \
+    who = f"{plan.cfg.name} ({plan.cfg.actuator_label()})"
+    title = f"{who}: metrics vs {info.name}\ninput: {plan.signal.describe()}; " \
             f"{info.description}"
     zipped = plan.cfg.sweep.mode == "zip" and len(plan.axes) > 1
     if zipped:
-        title = (f"{plan.cfg.name}: metrics per run (axes zipped: "
+        title = (f"{who}: metrics per run (axes zipped: "
                  f"{', '.join(a.name for a in plan.axes)})\ninput: {plan.signal.describe()}")
     if not info.numeric:
         prefix = f"{info.targets[0]} = "

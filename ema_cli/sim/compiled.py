@@ -20,11 +20,11 @@ from pathlib import Path
 
 from ema_cli import progress
 
-# seconds one unit takes to compile on this kind of machine (2 idle cores, `ema compile` from
-# an empty cache, measured as CPU time on a loaded machine: the 4 one-lane units 41 s in one
-# process, the first 20 s of it the callees they share; the 3 lane units 38 s in the other, the
-# identification kernels 3 s): the announcements' estimate
-COMPILE_S = {"rows": 10.0, "lanes": 12.0, "identify": 3.0}
+# seconds one unit takes to compile on this kind of machine (2 cores, `ema compile` from an empty
+# cache; the inner functions compiled without numba's wrappers, `ema_cli._numba.njit`: the
+# first unit of a family 12 s, the callees the family shares most of it, each further variant
+# 4-6 s, the identification kernels 2 s): the announcements' estimate
+COMPILE_S = {"rows": 6.5, "lanes": 7.5, "identify": 2.0}
 QUIET_ENV = "EMA_COMPILE_QUIET"  # set: compile without announcing (ema compile's workers)
 
 

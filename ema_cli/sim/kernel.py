@@ -288,7 +288,7 @@ def simulate_one_nb(P, a, S, ref_pos, ref_vel, load_half, ext_half, step_info, r
             S[a, r, 0] = W[r, 0]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", entry=True)
 def simulate_rows_nb(P, S, ref_pos, ref_vel, load_half, ext_half, step_info, ref_index, out_row,
                      dt, n_steps, k0, k1, dec, sig, met, variant):
     """Every row of P alone (:func:`simulate_one_nb`, state ``S[n_cases, N_ROWS, 1]``),
@@ -300,7 +300,7 @@ def simulate_rows_nb(P, S, ref_pos, ref_vel, load_half, ext_half, step_info, ref
                         out_row, dt, n_steps, k0, k1, dec, sig, met, variant)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", entry=True)
 def simulate_lanes_nb(P, S, ref_pos, ref_vel, load_half, ext_half, step_info, ref_index, out_row,
                       dt, n_steps, k0, k1, dec, sig, met, variant):
     """Chunks of :data:`LANES` rows of P advanced together (:func:`simulate_chunk_nb`, state

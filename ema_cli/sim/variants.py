@@ -58,7 +58,7 @@ def _lane_variant(W, j):
             | (int(W[R.thermal, j] != 0.0) << B_THERMAL))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def _variant_codes_nb(PT):
     """Per configuration (column of ``PT[N_PARAMS, n_cases]``), the variant it needs alone."""
     out = np.empty(PT.shape[1], dtype=np.int64)

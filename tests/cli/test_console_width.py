@@ -135,7 +135,7 @@ def test_acceptance_verdicts_fit(width, tmp_path):
     r, text = invoke(width, "acceptance", "configs/acceptance.yaml", "--only", "margins",
                      "--only", "load-deflection", "--out", str(tmp_path / f"a{width}"))
     assert r.exit_code == 0, text
-    stdout = text.split("reference-ema: actuator acceptance", 1)[1]
+    stdout = text.split("reference-ema: acceptance (reference EMA)", 1)[1]
     lines = [x for x in stdout.splitlines() if not x.startswith("note:")]  # stderr notes
     check_width("\n".join(lines), width)
     flat = words(stdout)

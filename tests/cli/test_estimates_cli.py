@@ -35,6 +35,10 @@ class Stop(Exception):
     ["tune", "configs/tune.yaml"],
     ["sensitivity", "configs/sensitivity.yaml", "--n", "8", "--method", "morris"],
     ["reproduce", "experiments/paper2020.yaml"],
+    ["threshold", "configs/deadzone2.yaml", "--vary", "deadzone2", "--range", "0.001", "0.1",
+     "--metric", "p2p_err_pos_deg", "--limit", "0.002"],
+    ["identify", "closed-loop", "--data", "experiments/logs/design_hc_1pct.csv"],
+    ["design", "experiments/logs/design_hc_1pct.csv"],
 ], ids=lambda a: a[0])
 def test_a_long_command_prints_its_estimate_first(monkeypatch, tmp_path, args):
     said: list[str] = []
@@ -54,6 +58,20 @@ def test_a_long_command_prints_its_estimate_first(monkeypatch, tmp_path, args):
     assert "estimated time ~" in r.output  # on the console (stderr), first
     # the figure is the cost model's for the size it states (n x steps x 1 ms / cores)
     when = est[0].split(":")[0].removeprefix("estimated time ")
+    if args[0] == "identify":  # the fit's own cost model (api.identify_logs.fit_estimate)
+        from ema_cli.api.identify_logs import fit_estimate
+        from ema_cli.config.loader import load_config
+        from ema_cli.identify.closed_loop.problem import load_log
+        from ema_cli.identify.log_settings import ClosedLoopSettings
+
+        cfg = load_config(None, [("data", args[3])], ClosedLoopSettings)
+        assert when == progress.duration(fit_estimate(cfg, load_log(args[3]).duration)[0])
+        assert "starts, about" in est[0], est[0]
+        return
+    if args[0] == "design":  # the sum of its three parts, each named with its own figure
+        parts = re.findall(r"(identification|tuning|sign-off) (~[\d.]+ (?:s|min|h))", est[0])
+        assert [p for p, _ in parts] == ["identification", "tuning", "sign-off"], est[0]
+        return
     m = re.search(r"([\d,]+) simulations of ([\d,]+) steps on (\d+) core", est[0])
     one = re.search(r"one run of ([\d,]+) steps", est[0])
     if m:

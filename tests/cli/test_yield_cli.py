@@ -41,7 +41,7 @@ def test_a_run_writes_every_file_and_answers_first(files, tmp_path):
     r = _yield(spec, tol, out)
     assert r.exit_code == 0, r.output
     lines = r.output.splitlines()  # stderr's progress lines mixed in by the runner
-    title = lines.index("one-step: production yield")
+    title = lines.index("one-step: production yield (reference EMA)")
     assert lines[title + 1].startswith("Yield ")
     for name in ("yield.json", "samples.parquet", "yield.md", "convergence.png",
                  "dist_step.png", "spec.resolved.yaml", "tolerances.yaml", "manifest.json"):

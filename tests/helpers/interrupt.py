@@ -30,7 +30,7 @@ EMA = Path(sys.executable).with_name("ema")
 MARKER = ".ema-run.json"
 TEMPORARY = re.compile(r"\..+\.[0-9a-f]{12}\.tmp")
 VOLATILE = re.compile(r"(^|_)(wall|timings?|elapsed|created|throughput)(_|$)|_s_per_|"
-                      r"^(steps_per_s|git_commit|kernel_s|kernel_load|python|numpy|numba|"
+                      r"^(steps_per_s|git_commit|kernel_s|kernel_load|load_s|python|numpy|numba|"
                       r"machine|ema_version|cache_dir|workers|backend|computed|cached)$")
 """Keys and columns that hold times, the machine or how the work was done (computed anew or
 read back from a cache), never the results: left out of the comparison."""

@@ -8,7 +8,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ema_cli.analysis.threshold import Criterion, find_threshold, simulation_evaluator
+from ema_cli.analysis.threshold import (
+    Criterion,
+    expected_rounds,
+    find_threshold,
+    simulation_evaluator,
+)
 from ema_cli.errors import EmaError
 from ema_cli.sim.signals import InputSignal
 from ema_cli.units import DEG
@@ -28,6 +33,19 @@ def test_max_direction_finds_sqrt2():
     assert r.bracket[1] >= math.sqrt(2)
     assert r.rel_width <= 1e-6
     assert r.n_sims == len(r.history) and r.n_sims <= 12 * 12
+
+
+@pytest.mark.parametrize("lo, hi, log, rtol, limit", [
+    (0.01, 100.0, True, 1e-6, 2.0), (0.001, 0.1, True, 1e-3, 1e-3), (1.0, 1e4, True, 0.05, 50.0),
+    (0.1, 10.0, False, 1e-3, 30.0), (0.5, 3.0, False, 1e-4, 3.0)])
+def test_the_estimate_counts_the_rounds_the_search_runs(lo, hi, log, rtol, limit):
+    """The time estimate's round count (ema threshold announces it) is the count the search
+    uses when the threshold lies inside the range: at most one round off (the threshold's
+    position decides whether the last grid interval is already narrow enough)."""
+    r = find_threshold(analytic, [Criterion("iae_pos_deg_s", "<=", limit)], lo, hi, log=log,
+                       rtol=rtol)
+    assert r.status == "found"
+    assert r.rounds <= expected_rounds(lo, hi, log, rtol) <= r.rounds + 1
 
 
 def test_min_direction_finds_smallest_passing_value():

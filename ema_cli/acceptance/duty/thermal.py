@@ -74,7 +74,7 @@ class Network:
                                "Cth_w": self.c_w, "Cth_h": self.c_h})[0]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def _coeffs_nb(i2, p_h, t_amb, net):
     g_wh, g_ha, c_w, c_h, r0, alpha, t_ref = net[0], net[1], net[2], net[3], net[4], net[5], \
         net[6]
@@ -82,7 +82,7 @@ def _coeffs_nb(i2, p_h, t_amb, net):
             i2 * r0 * (1.0 - alpha * t_ref) / c_w, (p_h + g_ha * t_amb) / c_h)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def prefix_nb(i2, p_h, h, t_amb, net, scale):
     """The maps from a piece's start to the end of each bin: ``x_j = Psi[j] x + g[j]``, each
     bin's losses constant (``i2*scale`` [A^2], ``p_h`` [W]) over ``h`` [s]."""
@@ -291,7 +291,7 @@ def _chunks(n: float, period: float, tau: float) -> list[float]:
     return out
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def average_nb(i2_c, i2_h, ph_c, ph_h, up_c, up_h, x0, x1, chunks, temps, net, amb, limit_k,
                class_k, period):
     """Tier A (:func:`_average`): chunks of ``chunks[k]`` cycles with the cycle's mean losses
@@ -406,7 +406,7 @@ def _cycle_stats_nb(psi, g, dpsi, dg, w, x0, x1, i2, di2, net, limit_k, class_k,
     return peak, life / count, above / count, cu / count, peak_h
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def cycles_nb(psi_c, g_c, psi_h, g_h, i2_c, i2_h, ph_c, ph_h, x0, x1, chunks, temps, net,
               limit_k, class_k, period):
     """Tier B (:func:`_cycles`): chunks of ``chunks[k]`` whole cycles from ``(x0, x1)`` [K],

@@ -56,7 +56,7 @@ POLISH_TOL = 1e-15  # xtol/ftol/gtol of the four-parameter polish [-]
 SHAPE_BINS = 4  # speed ranges per direction in the shape verdict's "where" [bins]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def stribeck_shape_nb(w, vs, delta, out):
     """E(w) = exp(-|w/vs|^delta) [-] for every speed of ``w`` [rad/s] into ``out``: the
     model's Stribeck function with Fc = 0, Fs = 1."""
@@ -64,7 +64,7 @@ def stribeck_shape_nb(w, vs, delta, out):
         out[i] = stribeck_nb(w[i], 0.0, 1.0, vs, delta)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def static_curve_nb(w, fc, fs, vs, delta, sigma2, out):
     """The model's steady-state friction torque T(w) [N*m] at every speed of ``w`` [rad/s]."""
     for i in range(w.shape[0]):

@@ -224,7 +224,15 @@ def check_span(record: PlantRecord, use: np.ndarray, prm: Mapping[str, Any]) -> 
 
 def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int | None], None]
               | None = None) -> PlantFit:
-    """The whole identification (module docstring) -> :class:`PlantFit`."""
+    """The whole identification (module docstring) -> :class:`PlantFit`; ``progress(stage,
+    done, total)`` as it advances (default: ``ema_cli.progress.report``, what the command line
+    shows)."""
+    if progress is None:
+        from ema_cli.progress import report
+
+        def progress(stage: str, done: int | None, total: int | None) -> None:
+            report(stage, done, total)
+    progress("reading the record", None, None)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     cfg, base, resolve, prm = _description(settings)
@@ -250,11 +258,13 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                        f"controller samples every {ts:.6g} s (controller.sample_time_s); "
                        "expected the controller's own samples")
     first = BENCHMARK.first_sample
+    progress("checking the controller against the record", None, None)
     check = check_controller(prm, record.q_m, record.reference_m, extras["actuation"],
                              extras["unit"], extras.get("disturbance"), first=first)
     delay = chosen_delay(check, settings.delay, record.source)
     timings["read_and_check"] = time.perf_counter() - t0
     use = mask(record, settings.window, first)
+    progress("IDIM-LS baseline", None, None)
     baseline = idim_ls(sliced(record, use), LAW_TERMS["symmetric"])
     floors = (oe.command_floor(record.force_n), oe.encoder_floor(record.q_m))
 
@@ -291,7 +301,8 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
     split = None
     if settings.split > 0:
         t1 = time.perf_counter()
-        split = _split(settings, record, use, chosen, plant_of, floors, prm, progress)
+        split = _split(settings, record, use, chosen, plant_of, floors, prm,
+                       lambda stage, done, total: progress(f"time split, {stage}", done, total))
         timings["split_validation"] = time.perf_counter() - t1
     timings["total"] = time.perf_counter() - t0
     return PlantFit(settings, record, extras, str(cfg.axis),

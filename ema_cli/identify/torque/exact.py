@@ -71,7 +71,7 @@ class ExactResult:
         return {n: float(v) for n, v in zip(self.names, self.x, strict=True)}
 
 
-@njit(cache=True)
+@njit(cache=True, entry=True)
 def profile_nb(alphas, dth, dw, tq, c_fixed, fit_c, contact, inv_tau, max_iter, j_out, x_out):
     """Profile kernel: for each alpha, kL (and c) in closed form -> j_out[G], x_out[G, n_par].
 

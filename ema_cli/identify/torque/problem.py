@@ -27,7 +27,7 @@ from ema_cli.model.transmission import FORMS, inverse_tau, shaft_torque, shaft_t
 PARAM_UNITS = {"kL": "N*m/rad", "alpha": "rad", "c": "N*m*s/rad"}
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", entry=True)
 def cost_batch_nb(X, dth, dw, tq, c_fixed, contact, inv_tau, out):
     """Eq. 8 for every row of ``X[n_pop, 2 or 3]`` (kL, alpha[, c]) into ``out[n_pop]``.
 
