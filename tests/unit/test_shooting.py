@@ -198,8 +198,9 @@ def test_fitting_some_segments_fits_them_as_a_fit_of_all_does():
 def short_fit():
     syn = closed_loop_log({"kL": 420.0, "alpha": 0.0055, "Fc": 0.05, "sigma2": 0.02}, 1.0, 3,
                           duration_s=1.0)
+    # no whole-log polish: a check beside the estimate, which nothing here reads
     settings = ClosedLoopSettings(shooting={"starts": 4, "lengthen_s": [0.1, 0.2]},
-                                  free_contact=False, profile_points=5)
+                                  free_contact=False, profile_points=5, polish=False)
     return syn, run_closed_loop(settings, _log(syn))
 
 
@@ -349,10 +350,11 @@ def test_stating_the_contact_law_fixes_its_shape(plant, freed):
     assert set(problem.names) - {"kL", "alpha", "Fc", "sigma2"} == freed
 
 
-def _tie_problem(noise_rpm: float, seed: int, segment_s: float = 0.1):
+def _tie_problem(noise_rpm: float, seed: int, segment_s: float = 0.1, scaled: bool = True):
     """A 2 s log at 1 kHz whose motor angle is known exactly: theta_m(t) = 40 rad x
     sin(2 pi (0.5 t + 1.5 t^2)) (a chirp to 6.5 Hz), its speed logged with white noise of
-    ``noise_rpm`` (its stated scale); the other channels smooth stand-ins."""
+    ``noise_rpm`` (its stated scale); the other channels smooth stand-ins. ``scaled`` False:
+    unit state scales instead of the reconstruction's (the tie's data do not use them)."""
     from ema_cli.identify.closed_loop import shooting_search as ss
     from ema_cli.units import RPM
 
@@ -369,6 +371,11 @@ def _tie_problem(noise_rpm: float, seed: int, segment_s: float = 0.1):
               "current_a": 1e-3, "voltage_cmd_v": 1e-3}
     problem, _ = build_problem(ClosedLoopSettings(free_contact=False, channels=scales), log)
     x = 0.5 * (problem.lower + problem.upper)
+    if not scaled:
+        from ema_cli.identify.closed_loop.shooting import N_X, ShootingProblem, make_segments
+
+        return (ShootingProblem(problem, make_segments(t, segment_s), np.ones(N_X), tie=True),
+                theta_m, x)
     return ss.build(problem, segment_s, x), theta_m, x
 
 
@@ -385,7 +392,7 @@ def test_the_motor_angle_tie_is_the_integral_of_the_logged_speed_with_its_standa
     assert np.max(np.abs(d_i - true)) < 1e-3 * np.max(np.abs(true))
     z = []
     for seed in range(30):
-        sp, theta_m, _ = _tie_problem(20.0, seed)
+        sp, theta_m, _ = _tie_problem(20.0, seed, scaled=False)
         d_i, s_i = sp.tie_data()
         z.append((d_i - np.diff(theta_m[sp.seg.first])) / s_i)
     ms = float(np.mean(np.concatenate(z) ** 2))
