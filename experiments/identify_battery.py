@@ -105,6 +105,22 @@ def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None =
     return row
 
 
+STAGES = (("start_states_s", "start states"), ("joint_lm_s", "joint LM"),
+          ("lengthen_s", "contact restart and lengthening"), ("refine_s", "refinement"),
+          ("ms_uncertainty_s", "covariance"), ("polish_s", "whole-log polish"),
+          ("uncertainty_profile_s", "alpha profile"))
+"""The stages of a fit (``timings_s`` keys of identification.json) in the summary's medians."""
+
+
+def stage_medians(d: pd.DataFrame) -> list[str]:
+    """The line of median seconds per stage of the fits ``d`` (their ``timings_s``)."""
+    if "timings_s" not in d:
+        return []
+    t = pd.DataFrame([json.loads(v) for v in d["timings_s"]])
+    parts = [f"{label} {t[k].median():.1f}" for k, label in STAGES if k in t]
+    return ["- median seconds per stage: " + ", ".join(parts)] if parts else []
+
+
 def summarise(df: pd.DataFrame) -> str:
     lines = ["# Identification battery (experiments/identify_battery.py)", ""]
     for which, tol in (("stated", TOL_STATED), ("unstated", TOL_UNSTATED)):
@@ -139,7 +155,7 @@ def summarise(df: pd.DataFrame) -> str:
             f"{len(d) * len(NAMES)} estimates; of the confirmed fits' estimates: "
             f"{100 * cover_c:.1f} % of {int(conf.sum()) * len(NAMES)}",
             f"- wall time per fit: median {d['wall_s'].median():.0f} s, max "
-            f"{d['wall_s'].max():.0f} s", "",
+            f"{d['wall_s'].max():.0f} s", *stage_medians(d), "",
             "| log | excitation | rate Hz | noise % | " + " | ".join(
                 f"{n} err %" for n in NAMES) + " | covered | confirmed | J/N | s |",
             "|---|---|---|---|" + "---|" * len(NAMES) + "---|---|---|---|"]

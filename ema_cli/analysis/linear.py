@@ -230,6 +230,17 @@ def closed_loop_stable(params: Mapping[str, float]) -> bool:
     return bool(np.max(np.linalg.eigvals(linear_model(params).A).real) < 0.0)
 
 
+def slowest_time_constant(params: Mapping[str, float]) -> float | None:
+    """The slowest time constant of the closed linear loop (both loops closed) [s]:
+    ``1/min |Re(lambda)|`` over the eigenvalues of :func:`linear_model`'s A, i.e. the time the
+    slowest mode of a response needs to decay by e. None when the linear loop is not
+    asymptotically stable (no decay to speak of)."""
+    re = np.linalg.eigvals(linear_model(params).A).real
+    if not np.all(re < 0.0):
+        return None
+    return float(1.0 / np.min(-re))
+
+
 @dataclass(frozen=True)
 class Margins:
     """Stability margins of one loop: gain margin [dB] at the phase crossover [Hz], phase

@@ -234,6 +234,7 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
             raise EmaError(f"data: out of memory reading the log '{cfg.data}' ({size:,} "
                            "bytes); read a part of it with window (T0, T1) [s]") from None
         check_log_steps(cfg, log.duration, str(cfg.data))
+        check_log_span(cfg, log, str(cfg.data))
         from ema_cli.progress import announce_estimate
 
         announce_estimate(*fit_estimate(cfg, log.duration))
@@ -304,6 +305,32 @@ def check_log_steps(cfg: Any, duration: float, source: str) -> None:
                            f"{key} = {dt:g} s is {steps:.3g} integration steps, more than "
                            f"{MAX_RUN_STEPS:.0e} per pass (each evaluation of the fit is one); "
                            f"raise {key} or cut the log with window (T0, T1) [s]")
+
+
+def check_log_span(cfg: Any, log: Any, source: str) -> None:
+    """Refuse a closed-loop log (or its ``window``) shorter than the slowest time constant to
+    identify: that of the closed loop's slowest mode, ``1/min |Re(lambda)|`` of the linear
+    limit (:func:`ema_cli.analysis.linear.slowest_time_constant`: no backlash, friction as its
+    viscous part) at the start of the fit, the middle of every free parameter's bounds (the
+    contact's nuisance parameters included). A response shorter than that has not shown its
+    slowest mode's decay, and the parameters it depends on are not in the log. No refusal
+    when that linear loop is not stable (nothing to measure the decay by)."""
+    from ema_cli.analysis.linear import slowest_time_constant
+    from ema_cli.errors import EmaError
+    from ema_cli.identify.closed_loop.ga_fit import build_problem
+
+    problem, _ = build_problem(cfg, log)
+    try:
+        tau = slowest_time_constant(problem.params(0.5 * (problem.lower + problem.upper)))
+    except EmaError:  # a plant the linear limit cannot describe (e.g. JL = 0): no claim
+        return
+    if tau is not None and log.duration < tau:
+        span = (f"--window {cfg.window[0]:g},{cfg.window[1]:g} of data file '{source}' keeps"
+                if cfg.window is not None else f"data file '{source}' spans")
+        raise EmaError(f"{span} {log.duration:.4g} s, shorter than the {tau:.4g} s it needs: "
+                       "the closed loop's slowest time constant at the middle of the free "
+                       f"bounds ({', '.join(problem.names)}); expected a log or --window at "
+                       f"least {tau:.4g} s long")
 
 
 def identify_friction_sweep(config: ConfigSource = None, overrides: Overrides = None,

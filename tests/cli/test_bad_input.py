@@ -354,3 +354,45 @@ def test_a_profile_that_starts_after_the_end_is_refused(tmp_path, key):
     assert len(err) == 1 and "starts at 2 s" in err[0]
     assert ("input.path" if key == "input" else "load.profile") in err[0]
     assert not (tmp_path / "o" / "signals.csv").exists()
+
+
+def test_a_closed_loop_log_shorter_than_its_slowest_time_constant_is_refused(tmp_path):
+    """A log, or a --window, shorter than the closed loop's slowest time constant at the start
+    of the fit (the middle of the free bounds) is refused in one line naming the file, the
+    span and the time constant; the time constant is checked against the poles of the loop
+    written out by hand (tests/helpers/linear.py, python-control); a window just longer than
+    it passes the check."""
+    import control
+    import numpy as np
+    import pandas as pd
+
+    from ema_cli.api.identify_logs import check_log_span
+    from ema_cli.identify.closed_loop.problem import DEFAULT_FREE, NUISANCE, load_log
+    from ema_cli.identify.log_settings import ClosedLoopSettings
+    from ema_cli.identify.make_data import closed_loop_log
+    from ema_cli.model.params import resolve
+    from tests.helpers.linear import linear_ss
+
+    syn = closed_loop_log({}, 0.0, 0, duration_s=0.3)
+    path = tmp_path / "short.csv"
+    pd.DataFrame(syn.columns).to_csv(path, index=False)
+    mid = {n: 0.5 * (lo + hi) for n, (lo, hi) in {**DEFAULT_FREE, **NUISANCE}.items()}
+    p = resolve({**mid, "friction": 1.0})
+    # the hand-written loop has no friction term: its viscous part joins the motor's damping
+    poles = control.poles(linear_ss({**p, "bm": p["bm"] + p["sigma2"]}))
+    tau = 1.0 / float(np.min(-poles.real))
+    assert 0.1 < tau < 0.15  # the default loop's slow mode (the speed PI's), ~0.12 s
+    r = invoke("identify", "closed-loop", "--data", str(path), "--window", "0,0.1",
+               "--out", str(tmp_path / "o"))
+    one_clear_line(r, "--window 0,0.1", "short.csv", "keeps 0.1 s", f"{tau:.4g} s")
+    assert not (tmp_path / "o").exists()
+    r = invoke("identify", "closed-loop", "--data", str(path), "--window", "0.2,0.3",
+               "--out", str(tmp_path / "o"))
+    one_clear_line(r, "0.2,0.3", "keeps 0.1 s", f"{tau:.4g} s")
+    cut = tmp_path / "cut.csv"
+    pd.DataFrame(syn.columns).iloc[:101].to_csv(cut, index=False)
+    r = invoke("identify", "closed-loop", "--data", str(cut), "--out", str(tmp_path / "o"))
+    one_clear_line(r, "cut.csv", "spans 0.1 s", f"{tau:.4g} s")
+    # just longer than the time constant: no refusal
+    cfg = ClosedLoopSettings(data=str(path), window=(0.0, 0.13))
+    check_log_span(cfg, load_log(path, window=cfg.window), str(path))

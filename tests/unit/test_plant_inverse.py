@@ -78,3 +78,23 @@ def test_a_robot_joint_without_a_controller_by_the_inverse_model(tmp_path, gravi
         missed = [o.name for o in lf.adequacy.omitted if o.missed]
         assert lf.adequacy.verdict == "NOT ADEQUATE" and "gravity cos q" in missed, missed
     assert names == ("M", "Fv", "Fc", "OF")
+
+
+def test_a_window_shorter_than_the_mechanical_time_constant_is_refused_by_the_inverse_model(
+        tmp_path):
+    """The inverse model's path refuses a window shorter than the axis' mechanical time
+    constant as the closed loop's does: J/Fv = 0.8/1.5 = 0.533 s against a 0.3 s window, in
+    one EmaError naming the file, the span and the time constant."""
+    from ema_cli.errors import EmaError
+
+    desc = tmp_path / "robot.yaml"
+    desc.write_text(ROBOT_DESC)
+    p = _robot_record(tmp_path / "joint.csv", 0.0)
+    settings = PlantSettings(
+        data=str(p), actuator=str(desc), law="symmetric", split=0.0, window=(1.0, 1.3),
+        columns={"time": "time_ms:ms", "position": "angle_deg:deg", "actuation": "current:A"})
+    with pytest.raises(EmaError) as err:
+        run_plant(settings)
+    msg = err.value.message
+    assert "joint.csv" in msg and "span 0.3" in msg and f"M/Fv = {0.8 / 1.5:.4g} s" in msg, msg
+    assert "\n" not in msg

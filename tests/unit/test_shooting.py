@@ -198,8 +198,9 @@ def test_fitting_some_segments_fits_them_as_a_fit_of_all_does():
 def short_fit():
     syn = closed_loop_log({"kL": 420.0, "alpha": 0.0055, "Fc": 0.05, "sigma2": 0.02}, 1.0, 3,
                           duration_s=1.0)
+    # no whole-log polish: a check beside the estimate, which nothing here reads
     settings = ClosedLoopSettings(shooting={"starts": 4, "lengthen_s": [0.1, 0.2]},
-                                  free_contact=False, profile_points=5)
+                                  free_contact=False, profile_points=5, polish=False)
     return syn, run_closed_loop(settings, _log(syn))
 
 
@@ -349,10 +350,11 @@ def test_stating_the_contact_law_fixes_its_shape(plant, freed):
     assert set(problem.names) - {"kL", "alpha", "Fc", "sigma2"} == freed
 
 
-def _tie_problem(noise_rpm: float, seed: int, segment_s: float = 0.1):
+def _tie_problem(noise_rpm: float, seed: int, segment_s: float = 0.1, scaled: bool = True):
     """A 2 s log at 1 kHz whose motor angle is known exactly: theta_m(t) = 40 rad x
     sin(2 pi (0.5 t + 1.5 t^2)) (a chirp to 6.5 Hz), its speed logged with white noise of
-    ``noise_rpm`` (its stated scale); the other channels smooth stand-ins."""
+    ``noise_rpm`` (its stated scale); the other channels smooth stand-ins. ``scaled`` False:
+    unit state scales instead of the reconstruction's (the tie's data do not use them)."""
     from ema_cli.identify.closed_loop import shooting_search as ss
     from ema_cli.units import RPM
 
@@ -369,6 +371,11 @@ def _tie_problem(noise_rpm: float, seed: int, segment_s: float = 0.1):
               "current_a": 1e-3, "voltage_cmd_v": 1e-3}
     problem, _ = build_problem(ClosedLoopSettings(free_contact=False, channels=scales), log)
     x = 0.5 * (problem.lower + problem.upper)
+    if not scaled:
+        from ema_cli.identify.closed_loop.shooting import N_X, ShootingProblem, make_segments
+
+        return (ShootingProblem(problem, make_segments(t, segment_s), np.ones(N_X), tie=True),
+                theta_m, x)
     return ss.build(problem, segment_s, x), theta_m, x
 
 
@@ -385,7 +392,7 @@ def test_the_motor_angle_tie_is_the_integral_of_the_logged_speed_with_its_standa
     assert np.max(np.abs(d_i - true)) < 1e-3 * np.max(np.abs(true))
     z = []
     for seed in range(30):
-        sp, theta_m, _ = _tie_problem(20.0, seed)
+        sp, theta_m, _ = _tie_problem(20.0, seed, scaled=False)
         d_i, s_i = sp.tie_data()
         z.append((d_i - np.diff(theta_m[sp.seg.first])) / s_i)
     ms = float(np.mean(np.concatenate(z) ** 2))
@@ -653,3 +660,41 @@ def test_when_the_longest_segments_do_not_fit_the_estimate_falls_back_to_the_anc
     assert sh["lengthened_to_s"] == [0.1] and "refine_anchor" in sh["stage_iterations"]
     assert js["optimum"]["confirmed"] is True, js["optimum"]
     assert abs(js["error_pct_vs_truth"]["kL"]) < 1.0, js["error_pct_vs_truth"]
+
+
+@pytest.mark.parametrize(("confirmed", "adequate", "ridge", "moved", "restarts", "concludes"), [
+    (True, True, True, True, 0, 1),  # confirmed and adequate: no restart, however it sits
+    (False, True, True, True, 1, 2),  # not confirmed on the ridge: restarted, concluded again
+    (True, False, True, False, 1, 1),  # not adequate on the ridge, the restart moved nothing
+    (False, False, False, True, 0, 1),  # not on the jump law's ridge: nothing to restart
+])
+def test_the_contact_restart_runs_only_when_the_verdict_needs_it(
+        monkeypatch, confirmed, adequate, ridge, moved, restarts, concludes):
+    """The contact restart (other ramp-in times of the contact law) runs only for a candidate
+    on the jump law's ridge whose fit, concluded without it, is not confirmed or not
+    adequate; the fit is concluded again only when a restart moved a candidate, and that
+    second conclusion is the answer."""
+    from types import SimpleNamespace
+
+    import ema_cli.identify.closed_loop.shooting_fit as sf
+
+    calls = {"restart": 0, "conclude": 0}
+
+    def conclude(problem, cands, **kw):
+        calls["conclude"] += 1
+        return SimpleNamespace(confirmed=confirmed, which=calls["conclude"], polish=None)
+
+    def restart(cands, dt, iters):
+        calls["restart"] += 1
+        return moved
+
+    monkeypatch.setattr(sf, "search", lambda *a, **k: SimpleNamespace(iterations=1))
+    monkeypatch.setattr(sf, "candidates", lambda found: [found])
+    monkeypatch.setattr(sf, "on_jump_ridge", lambda c: ridge)
+    monkeypatch.setattr(sf, "adequate", lambda *a: adequate)
+    monkeypatch.setattr(sf, "conclude", conclude)
+    monkeypatch.setattr(sf, "restart_contact", restart)
+    out = sf.shooting_estimate(None, {}, n_starts=2, segment_s=0.05, dt_search=5e-5, seed=0,
+                               max_iter=1, polish_iter=0)
+    assert calls == {"restart": restarts, "conclude": concludes}
+    assert out.which == concludes  # the last conclusion is the answer

@@ -411,20 +411,23 @@ class ShootingProblem:
         residuals (if any; ``v`` needed) couple neighbouring segments."""
         p, n = self.p, self.seg.n
         nd = self.n_data
-        owner_all = np.full(r.shape[0], -1)
-        owner_all[:nd] = np.tile(self._gather()[0], len(self.base.channels))
         A = np.zeros((self.n_vars, self.n_vars))
         g = np.zeros(self.n_vars)
         A[:p, :p] = Jx.T @ Jx
         g[:p] = Jx.T @ r
+        # the sums over each segment's samples (a run in order, every channel) at once
+        n_ch, N = len(self.base.channels), self.base.log.n
+        jsd, rd = Js[:nd].reshape(n_ch, N, NV), r[:nd].reshape(n_ch, N)
+        at = self.seg.first  # the first sample each segment owns (Segments.data_range)
+        Ass = np.add.reduceat(np.einsum("cik,cil->ikl", jsd, jsd), at, axis=0)
+        Aps = np.add.reduceat(np.einsum("cij,cik->ijk", Jx[:nd].reshape(n_ch, N, p), jsd), at,
+                              axis=0)
+        g[p:] = np.add.reduceat(np.einsum("cik,ci->ik", jsd, rd), at, axis=0).ravel()
         for k in range(n):
-            rows = owner_all == k
             c = slice(p + k * NV, p + (k + 1) * NV)
-            jk = Js[rows]
-            A[c, c] = jk.T @ jk
-            A[:p, c] = Jx[rows].T @ jk
-            A[c, :p] = A[:p, c].T
-            g[c] = jk.T @ r[rows]
+            A[c, c] = Ass[k]
+            A[:p, c] = Aps[k]
+            A[c, :p] = Aps[k].T
         if r.shape[0] > nd:
             if v is None:
                 raise ValueError("normal_equations: the tie residuals need the candidate v")

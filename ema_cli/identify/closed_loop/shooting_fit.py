@@ -47,9 +47,12 @@ import numpy as np
 from ema_cli.identify.closed_loop.problem import ClosedLoopProblem
 from ema_cli.identify.closed_loop.shooting_lengthen import (
     Lengthening,
+    candidates,
     continue_at,
     lengthen_both,
+    on_jump_ridge,
     on_same_segments,
+    restart_contact,
     split_for_covariance,
 )
 from ema_cli.identify.closed_loop.shooting_quality import (
@@ -258,14 +261,66 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                       nuisance: tuple[str, ...] = (), lengthen: tuple[float, ...] = (),
                       report: Any = None, tie: bool = True) -> ShootingOutcome:
     """Search, uncertainty, polish and verdict (module docstring); the polish at the
-    problem's fine step ``problem.dt``."""
-    res = search(problem, n_starts=n_starts, segment_s=segment_s, dt=dt_search, seed=seed,
-                 max_iter=max_iter, report=report, tie=tie)
+    problem's fine step ``problem.dt``. The contact restart (:func:`restart_contact`) runs
+    only when the verdict needs it: when the search's best or runner-up sits on the jump
+    law's ridge and the fit without it is not confirmed or not adequate; the fit is then
+    concluded again from the restarted candidates (if a restart moved one) and that is the
+    answer."""
+    found = search(problem, n_starts=n_starts, segment_s=segment_s, dt=dt_search, seed=seed,
+                   max_iter=max_iter, report=report, tie=tie)
     timings: dict[str, float] = {}
-    iters: dict[str, int] = {"search": res.iterations}
+    iters: dict[str, int] = {"search": found.iterations}
+    kw = {"notes": notes, "lengthen": lengthen, "dt_search": dt_search,
+          "refine_iter": refine_iter, "nuisance": nuisance, "report": report,
+          "timings": timings, "iters": iters}
+    out = conclude(problem, candidates(found), **kw)
+    if any(on_jump_ridge(c) for c in candidates(found)) and not (
+            out.confirmed and adequate(problem, notes, out)):
+        if report:
+            report("the contact law at other ramp-in times", 0, 1)
+        t0 = time.perf_counter()
+        again = candidates(found)
+        moved = restart_contact(again, dt_search, iters)
+        timings["contact_restart_s"] = time.perf_counter() - t0
+        if moved:
+            out = conclude(problem, again, **kw)
+    if polish_iter <= 0:
+        out.polish = {"kept": False, "why": "no polish (polish: false)"}
+        return out
     t0 = time.perf_counter()
-    lg = lengthen_both(res, lengthen, dt_search, iters, report, notes)
-    timings["lengthen_s"] = time.perf_counter() - t0
+    out.polish = polish_check(problem, notes, out.x, out.unc_ms, polish_iter, report)
+    timings["polish_s"] = time.perf_counter() - t0
+    return out
+
+
+def adequate(problem: ClosedLoopProblem, notes: dict[str, str], out: ShootingOutcome
+             ) -> bool:
+    """Whether the segments' prediction of ``out`` passes the adequacy tests
+    (:func:`ema_cli.identify.closed_loop.adequacy.adequacy`, the channels with an automatic
+    scale judged), as the fit's report judges it."""
+    from ema_cli.identify.closed_loop.adequacy import adequacy
+
+    judged = tuple(c for c in problem.channels if notes[c] in JUDGED_NOTES)
+    return bool(adequacy(problem.channels, problem.measured, out.segment_prediction,
+                         problem.log.theta_ref, problem.log.t, out.fit_first,
+                         judged)["adequate"])
+
+
+def _add_time(timings: dict[str, float], key: str, t0: float) -> None:
+    timings[key] = timings.get(key, 0.0) + time.perf_counter() - t0
+
+
+def conclude(problem: ClosedLoopProblem, cands: list[ShootingSearch], *,
+             notes: dict[str, str], lengthen: tuple[float, ...], dt_search: float,
+             refine_iter: int, nuisance: tuple[str, ...], report: Any,
+             timings: dict[str, float], iters: dict[str, int]) -> ShootingOutcome:
+    """The search's candidates (:func:`candidates`, changed in place) lengthened, the best
+    refined, its uncertainty and the verdict (module docstring, 2.-3. and 5.) -> the outcome
+    without the whole-log check; seconds per stage added to ``timings``, LM iterations in
+    ``iters``."""
+    t0 = time.perf_counter()
+    lg = lengthen_both(cands, lengthen, dt_search, iters, report, notes)
+    _add_time(timings, "lengthen_s", t0)
     t0 = time.perf_counter()
     fine = problem.dt
     dt_unc = min(fine, dt_search)
@@ -286,7 +341,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
             unc_ms, r_ms, r_tie = unc_a, r_a, r_tie_a
     runner, seg_shift, runner_won = lg.runner, lg.shift, lg.runner_won
     x_runner = None if runner is None else runner.x.copy()
-    timings["refine_s"] = time.perf_counter() - t0
+    _add_time(timings, "refine_s", t0)
     t0 = time.perf_counter()
     tie = tie_check(res_cov, r_tie)
     # widened by the method's own errors, which no noise model covers: the step's (above) and
@@ -296,7 +351,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
     unc_ms.ci_low = unc_ms.ci_low - widen
     unc_ms.ci_high = unc_ms.ci_high + widen
     ratios = channel_ratios(problem, r_ms)
-    timings["ms_uncertainty_s"] = time.perf_counter() - t0
+    _add_time(timings, "ms_uncertainty_s", t0)
     reasons = []
     n_fin = len(res.final_cost)
     high = too_high(ratios, notes)
@@ -352,13 +407,7 @@ def shooting_estimate(problem: ClosedLoopProblem, notes: dict[str, str], *, n_st
                           stage_iterations=iters, runner_up_won=runner_won, tie=tie,
                           fell_back=fell_back, fit_first=res_cov.sp.seg.first.copy(),
                           segment_prediction=seg_pred, agreement=agreement)
-    if polish_iter <= 0:
-        out.polish = {"kept": False, "why": "no polish (polish: false)"}
-        return out
-    t0 = time.perf_counter()
-    out.polish = polish_check(problem, notes, res.x, unc_ms, polish_iter, report)
-    timings["polish_s"] = time.perf_counter() - t0
     return out
 
 
-__all__ = ["ShootingOutcome", "shooting_estimate"]
+__all__ = ["ShootingOutcome", "adequate", "conclude", "shooting_estimate"]

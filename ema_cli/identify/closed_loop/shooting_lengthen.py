@@ -78,6 +78,16 @@ JUMP_LAW_FRACTION = 0.01
 fraction of its range from its lower bound [-] (it costs about a lengthening stage)."""
 
 
+def on_jump_ridge(res: ShootingSearch) -> bool:
+    """Whether ``res`` has the contact's ramp-in time free and sits on the jump law's ridge
+    (``contact_tau`` within :data:`JUMP_LAW_FRACTION` of its range from its lower bound)."""
+    b = res.sp.base
+    if "contact_tau" not in b.names:
+        return False
+    jt = b.names.index("contact_tau")
+    return bool(res.x[jt] <= b.lower[jt] + JUMP_LAW_FRACTION * (b.upper[jt] - b.lower[jt]))
+
+
 def contact_restart(res: ShootingSearch, dt: float, iterations: int) -> bool:
     """When the contact's shape is free (``contact_tau``, ``contact_hc``: nuisance parameters)
     and the fit sits on the jump law (``contact_tau`` on its lower bound, within
@@ -94,14 +104,12 @@ def contact_restart(res: ShootingSearch, dt: float, iterations: int) -> bool:
     continued (``iterations``) and kept only if it ends lower."""
     sp = res.sp
     names = sp.base.names
-    if "contact_tau" not in names:
-        return False
+    if not on_jump_ridge(res):
+        return False  # no contact shape free, or a ramp-in found: not the jump law's ridge
     jt = names.index("contact_tau")
     jh = names.index("contact_hc") if "contact_hc" in names else None
     x, S = sp.unpack(res.V)
     lo, hi = sp.base.lower[jt], sp.base.upper[jt]
-    if x[jt] > lo + JUMP_LAW_FRACTION * (hi - lo):
-        return False  # a ramp-in found: not the jump law's ridge
     cands = []
     for tau in CONTACT_TAUS:
         if not lo <= tau <= hi:
@@ -243,21 +251,39 @@ def _snapshot(c: ShootingSearch) -> ShootingSearch:
                                x_at=dict(c.x_at))
 
 
-def lengthen_both(res: ShootingSearch, lengthen: tuple[float, ...], dt_search: float,
-                  iters: dict[str, int], report: Any = None,
-                  notes: dict[str, str] | None = None) -> Lengthening:
-    """The best start and the runner-up continued on the longer segments ``lengthen`` [s]
-    (:func:`lengthened`), with the state at the last length that leaves
-    :data:`MIN_SEGMENTS` segments kept as the anchor when they go on beyond it."""
-    # the runner-up goes the same way, so that the agreement compares like with like
-    runner = None
+def candidates(res: ShootingSearch) -> list[ShootingSearch]:
+    """The search's best start and its runner-up (when another start finished), each its own
+    copy: the runner-up goes the same way as the best, so that their agreement compares like
+    with like."""
+    cands = [_snapshot(res)]
     if res.final_V is not None and len(res.final_V) > 1:
-        runner = dataclasses.replace(res, V=res.final_V[1].copy(), x=res.final_x[1].copy(),
-                                     cost=float(res.final_cost[1]), lengths=[])
-    cands = [res] if runner is None else [res, runner]
-    for k, c in enumerate(cands):  # each its own record, from the search's segments on
-        if contact_restart(c, dt_search, LENGTHEN_ITER) and k == 0:
-            iters["contact_restart"] = 1
+        cands.append(dataclasses.replace(res, V=res.final_V[1].copy(),
+                                         x=res.final_x[1].copy(),
+                                         cost=float(res.final_cost[1]), lengths=[],
+                                         x_at={}))
+    return cands
+
+
+def restart_contact(cands: list[ShootingSearch], dt: float, iters: dict[str, int]) -> bool:
+    """:func:`contact_restart` of each candidate (in place) -> whether any moved (the best's
+    move recorded as ``iters["contact_restart"]``)."""
+    moved = False
+    for k, c in enumerate(cands):
+        if contact_restart(c, dt, LENGTHEN_ITER):
+            moved = True
+            if k == 0:
+                iters["contact_restart"] = 1
+    return moved
+
+
+def lengthen_both(cands: list[ShootingSearch], lengthen: tuple[float, ...],
+                  dt_search: float, iters: dict[str, int], report: Any = None,
+                  notes: dict[str, str] | None = None) -> Lengthening:
+    """The best start and the runner-up (:func:`candidates`, in place) continued on the longer
+    segments ``lengthen`` [s] (:func:`lengthened`), with the state at the last length that
+    leaves :data:`MIN_SEGMENTS` segments kept as the anchor when they go on beyond it."""
+    res = cands[0]
+    for c in cands:  # each its own record, from the search's segments on
         c.x_at = {0.0: c.x.copy()}
     shifts = [np.zeros_like(res.x) for _ in cands]
     anchor = None
@@ -292,6 +318,7 @@ def on_same_segments(best: ShootingSearch, runner: ShootingSearch
     return length, xb, xr
 
 
-__all__ = ["LENGTHEN_ITER", "MIN_FIT_SEGMENTS", "MIN_SEGMENTS", "Lengthening", "contact_restart",
-           "continue_at", "lengthen_both", "lengthened", "on_same_segments",
+__all__ = ["LENGTHEN_ITER", "MIN_FIT_SEGMENTS", "MIN_SEGMENTS", "Lengthening", "candidates",
+           "contact_restart", "continue_at", "lengthen_both", "lengthened", "on_jump_ridge",
+           "on_same_segments", "restart_contact",
            "split_for_covariance"]

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ema_cli.identify.closed_loop.problem import ClosedLoopProblem
-from ema_cli.identify.closed_loop.shooting import ShootingProblem
+from ema_cli.identify.closed_loop.shooting import NV, ShootingProblem
 from ema_cli.identify.closed_loop.shooting_seat import (
     chain_seat,
     fit_states,
@@ -36,6 +36,43 @@ cost by more than this many residuals' worth [-]: measured on two battery logs, 
 repeated re-seats of a start moved the cost by less than 0.2 residuals' worth (the other 6 by
 2.1 to 9.5, which still go on), each one a full re-fit of every segment (1.1 s at the search's
 step, 4.7 s at the fine one for a 4 s log)."""
+
+
+STATE_BAND = 2 * NV - 1
+"""The half-bandwidth of the segment states' block of the normal equations: each segment's
+states touch only their own residuals (a block of NV on the diagonal), and the motor-angle
+tie couples each segment with the next (the blocks beside it) [-]."""
+
+
+def lm_step(A: np.ndarray, g: np.ndarray, damping: np.ndarray, p: int) -> np.ndarray:
+    """The Levenberg-Marquardt step ``-(A + diag(damping))^-1 g`` of the joint fit (``p``
+    parameters first, then every segment's states), solved by its structure: the states'
+    block is banded (:data:`STATE_BAND`), so it is eliminated by a banded Cholesky
+    factorisation and only the parameters' p x p Schur complement is solved densely
+    (O(n_vars * band^2) instead of the dense O(n_vars^3): a 4 s log on 0.05 s segments has
+    487 unknowns). Falls back to the dense solve when the states' block is not numerically
+    positive definite. Raises ``numpy.linalg.LinAlgError`` when that fails too."""
+    from scipy.linalg import cho_solve_banded, cholesky_banded
+
+    M = A + np.diag(damping)
+    n = M.shape[0]
+    ns = n - p
+    u = min(STATE_BAND, ns - 1)
+    if ns <= 0 or u < 0:
+        return -np.linalg.solve(M, g)
+    S = M[p:, p:]
+    ab = np.zeros((u + 1, ns))
+    for k in range(u + 1):  # upper form: ab[u - k, k:] is the k-th superdiagonal
+        ab[u - k, k:] = np.diagonal(S, k)
+    B = M[:p, p:]
+    try:
+        c = cholesky_banded(ab, lower=False)
+        X = cho_solve_banded((c, False), np.column_stack([B.T, g[p:]]))
+    except (np.linalg.LinAlgError, ValueError):
+        return -np.linalg.solve(M, g)
+    XB, Xg = X[:, :p], X[:, p]
+    dp = np.linalg.solve(M[:p, :p] - B @ XB, B @ Xg - g[:p])
+    return np.concatenate([dp, -Xg - XB @ dp])
 
 
 @dataclass
@@ -135,7 +172,7 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
             for q in pending:
                 i = act[q]
                 try:
-                    dv = -np.linalg.solve(A[q] + st.lam[i] * np.diag(d[q]), g[q])
+                    dv = lm_step(A[q], g[q], st.lam[i] * d[q], p)
                 except np.linalg.LinAlgError:
                     dv = np.zeros(sp.n_vars)
                 trials.append(np.clip(st.V[i] + dv, lo, hi))

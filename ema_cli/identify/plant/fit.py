@@ -205,6 +205,23 @@ def _fit_law(law: str, record: PlantRecord, use: np.ndarray, plant_of: Callable,
     return start, fit, plant
 
 
+def check_span(record: PlantRecord, use: np.ndarray, prm: Mapping[str, Any]) -> None:
+    """Refuse a fit whose samples ``use`` span less than the slowest time constant to
+    identify, the axis' mechanical one ``M/Fv`` (the rigid axis' mass or inertia, motor's
+    reflected included, over its largest viscous friction; the description's nominal values),
+    or fewer than 100 samples: a velocity that has not had that time to respond to the force
+    does not separate the mass from the viscous friction."""
+    mass = prm.get("JL", 0.0) + prm.get("m", 1.0) ** 2 * prm.get("Jm", 0.0)
+    fv = max(prm.get("Fv_L", 0.0), prm.get("Fv_L_neg", 0.0))
+    tau = mass / fv if fv > 0 else 0.0
+    span = float(np.count_nonzero(use) * record.h_s)
+    if span < max(tau, 0.0) or np.count_nonzero(use) < 100:
+        raise EmaError(f"{record.source}: the fitted samples span {span:.4g} s "
+                       f"({np.count_nonzero(use)} samples), shorter than the axis' mechanical "
+                       f"time constant M/Fv = {tau:.4g} s (the slowest to identify; at least 100 "
+                       "samples); expected a longer --window")
+
+
 def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int | None], None]
               | None = None) -> PlantFit:
     """The whole identification (module docstring) -> :class:`PlantFit`; ``progress(stage,
@@ -226,6 +243,9 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
                                        limit_force=(umax * prm.get("amp_gain", 1.0)
                                                     if np.isfinite(umax) else None),
                                        need_reference=False)
+    # the slowest time constant to identify, from the description's nominal values: refused
+    # on the closed loop's path and on the inverse model's alike
+    check_span(record, mask(record, settings.window, BENCHMARK.first_sample), prm)
     why_open = ("the record has no reference channel" if record.reference_m is None else
                 "the description has no discrete controller" if prm.get("ctrl") != 1.0 else "")
     if why_open:
@@ -244,16 +264,6 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
     delay = chosen_delay(check, settings.delay, record.source)
     timings["read_and_check"] = time.perf_counter() - t0
     use = mask(record, settings.window, first)
-    # the slowest time constant to identify, from the description's nominal values
-    mass = prm.get("JL", 0.0) + prm.get("m", 1.0) ** 2 * prm.get("Jm", 0.0)
-    fv = max(prm.get("Fv_L", 0.0), prm.get("Fv_L_neg", 0.0))
-    tau = mass / fv if fv > 0 else 0.0
-    span = float(np.count_nonzero(use) * record.h_s)
-    if span < max(tau, 0.0) or np.count_nonzero(use) < 100:
-        raise EmaError(f"{record.source}: the fitted samples span {span:.4g} s "
-                       f"({np.count_nonzero(use)} samples), shorter than the axis' mechanical "
-                       f"time constant M/Fv = {tau:.4g} s (the slowest to identify; at least 100 "
-                       "samples); expected a longer --window")
     progress("IDIM-LS baseline", None, None)
     baseline = idim_ls(sliced(record, use), LAW_TERMS["symmetric"])
     floors = (oe.command_floor(record.force_n), oe.encoder_floor(record.q_m))
