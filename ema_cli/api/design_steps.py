@@ -180,3 +180,43 @@ class DesignCase:
         for v in self.result.verdicts:
             rows.setdefault(v.test, []).append(v.result)
         return {t: overall(r) for t, r in rows.items()}
+
+
+def design_estimate(plan: dict[str, Any], budget: int | None) -> tuple[float, str]:
+    """The estimated time [s] of the whole design and what it counts (announced before the
+    identification; the steps' own estimates are not added again): the fit
+    (``api.identify_logs.fit_estimate``), the tuning (its evaluations x its scenarios and the
+    spec's tests the search measures per candidate) and the nominal sign-off (the battery's
+    integration steps); the corners run only while they can change the verdict and are not
+    counted."""
+    from ema_cli.api.identify_logs import fit_estimate
+    from ema_cli.config.acceptance import AcceptanceSpec
+    from ema_cli.config.loader import load_config
+    from ema_cli.config.tune import TuneConfig
+    from ema_cli.identify.closed_loop.problem import load_log
+    from ema_cli.identify.log_settings import ClosedLoopSettings
+    from ema_cli.limits import cores
+    from ema_cli.progress import duration, kernel_seconds
+    from ema_cli.tune.run import evaluations_for
+    from ema_cli.tune.spec import SEARCH_KINDS
+
+    ids = load_config(plan["id_doc"], plan["id_pairs"], ClosedLoopSettings)
+    length = load_log(ids.data, columns=ids.columns, window=ids.window).duration
+    fit_s, _ = fit_estimate(ids, length)
+    tcfg = load_config(plan["tune_doc"], plan["tune_pairs"], TuneConfig)
+    o = tcfg.optimiser
+    evals = o.runs * evaluations_for(o.method, budget or o.budget, o.pop, len(tcfg.variables),
+                                     o.polish, o.local)
+    sp = load_config(plan["spec_doc"], [], AcceptanceSpec)
+    dt = tcfg.simulation.dt_s
+    per_candidate = (len(tcfg.scenarios) * tcfg.simulation.duration_s
+                     + sum(t.sim_seconds() for t in sp.tests.values()
+                           if t.test in SEARCH_KINDS)) / dt
+    battery = sum(t.sim_seconds() for t in sp.tests.values()) / dt
+    workers = cores()
+    tune_s = kernel_seconds(evals * per_candidate, 1, workers)
+    sign_s = kernel_seconds(battery, 1, workers)
+    return fit_s + tune_s + sign_s, (
+        f"identification {duration(fit_s)}, tuning {duration(tune_s)} ({evals:,} "
+        f"evaluations), sign-off {duration(sign_s)} (the nominal case; corners only while "
+        "they can change the verdict)")

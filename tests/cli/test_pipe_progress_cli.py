@@ -4,7 +4,7 @@ reading of ``cli.progress``'s clock advances 3 s, so every stage passes ``LONG_S
 may print its tenths), prints each stage's first line and at most one line per tenth of it:
 at most 11 lines per stage, whatever the number of generations, units, starts or cases.
 
-The runs are the small ones of the interruption harness (tests/system/test_interrupted_runs.py);
+The runs are the small ones of the interruption harness (tests/helpers/tiny_runs.py);
 tune runs in the fast tier, the others in the slow tier."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 import ema_cli.cli.progress as cli_progress
 from ema_cli.cli.main import app
 from ema_cli.cli.progress import stage_key
-from tests.system.test_interrupted_runs import (
+from tests.helpers.tiny_runs import (
     CLOSED_LOOP,
     DESIGN,
     DESIGN_SPEC,
