@@ -252,12 +252,13 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
 
 FIT_PASSES_PER_START = 440.0
 """Kernel work of a multiple-shooting fit, in passes over the whole log at ``dt_s`` per start
-(the lengthening stages, Jacobians, intervals and profile included), measured on the README's
-4 s example (`ema identify --make-data closed-loop --noise 1`, then the fit; the figure and
-its date in docs/identification.md)."""
-FIT_OVERHEAD = 2.0
-"""A fit's wall time over its kernel time on 2 idle cores (the least-squares algebra of the
-segments, the verdict's checks), measured on the same example."""
+(the lengthening stages, Jacobians, intervals and profile included): 1.42e9 lane-steps for
+the README's 4 s example (`ema identify --make-data closed-loop --noise 1`, then the fit) at
+8 starts, 2026-11-27."""
+FIT_OVERHEAD = 3.0
+"""A fit's wall time over its kernel time at ``progress.CPU_S_PER_STEP`` on 2 idle cores (the
+least-squares algebra of the segments, the verdict's checks): 54 s for the README's 4 s
+example (3.5x), 17.6 s for design's 2 s log (2.3x), 2026-11-27."""
 
 
 def fit_estimate(cfg: Any, duration: float, workers: int | None = None) -> tuple[float, str]:

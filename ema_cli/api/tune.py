@@ -351,6 +351,13 @@ def tune_inputs(config: ConfigSource, overrides: Overrides = None, *,
     return _inputs(load_config(config, pairs, TuneConfig), pairs, method, runs, budget, spec)
 
 
+EVAL_OVERHEAD_S = 0.015
+"""A candidate evaluation's time beyond its kernel time on 2 idle cores (scoring, the
+optimiser's bookkeeping, the spec's measurements): 13.5 ms for `ema tune configs/tune.yaml`
+(24 s for 1,428 evaluations, 4.7 s of it the kernel's estimate), 19 ms for the tuning of the
+README's design line, 2026-11-27 [s]."""
+
+
 def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
          runs: int | None = None, budget: int | None = None, spec: ConfigSource = None,
          progress: Callable[[int, int, int], None] | None = None,
@@ -421,14 +428,15 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
         m, b = method or o.method, budget or o.budget
         log(explain_budget(m, b, o.pop, len(cfg.variables), o.polish, o.local)
             + (f"; x {n_runs} runs" if n_runs > 1 else ""))
-        n_sims = n_runs * evaluations_for(m, b, o.pop, len(cfg.variables), o.polish,
-                                          o.local) * len(scenarios)
+        evals = n_runs * evaluations_for(m, b, o.pop, len(cfg.variables), o.polish, o.local)
+        n_sims = evals * len(scenarios)
         sim = cfg.simulation
         steps, workers = round(sim.duration_s / sim.dt_s), os.cpu_count() or 1
-        announce_estimate(kernel_seconds(n_sims, steps, workers),
+        announce_estimate(kernel_seconds(n_sims, steps, workers) + evals * EVAL_OVERHEAD_S,
                           f"{n_sims:,} simulations of {steps:,} steps on {workers} cores "
-                          f"({len(scenarios)} scenarios per evaluation; --budget, --runs set "
-                          "it)", force=n_sims > BIG_RUN)
+                          f"({evals:,} evaluations of {len(scenarios)} scenarios, "
+                          f"{1e3 * EVAL_OVERHEAD_S:g} ms each beyond the kernel; --budget, "
+                          "--runs set it)", force=n_sims > BIG_RUN)
     from ema_cli.sweep.executor import executing
 
     with executing(backend, n_jobs, scheduler) as ex:

@@ -142,6 +142,16 @@ class _ClearFirst:
         return renderables
 
 
+def _took(reporter: StageReporter, err_console: Any) -> None:
+    """The actual time at the end of a command that announced an estimate or ran long."""
+    from ema_cli.progress import finished_line
+
+    done = finished_line()
+    if done:
+        reporter.clear()
+        err_console.print(done, highlight=False, markup=False)
+
+
 def stages(command: str, console: Any, err_console: Any):  # type: ignore[no-untyped-def]
     """A context manager for one command: installs a :class:`StageReporter` as the progress
     reporter (announcements go to ``err_console``) and erases its line whenever the command's
@@ -150,7 +160,7 @@ def stages(command: str, console: Any, err_console: Any):  # type: ignore[no-unt
 
     from rich.console import RenderHook
 
-    from ema_cli.progress import finished_line, reporting
+    from ema_cli.progress import reporting
 
     @contextlib.contextmanager
     def run():  # type: ignore[no-untyped-def]
@@ -161,11 +171,13 @@ def stages(command: str, console: Any, err_console: Any):  # type: ignore[no-unt
         try:
             with reporting(reporter, lambda text: err_console.print(text, highlight=False,
                                                                     markup=False)):
-                yield reporter
-                done = finished_line()  # the actual time, after an estimate or a long run
-                if done:
-                    reporter.clear()
-                    err_console.print(done, highlight=False, markup=False)
+                try:
+                    yield reporter
+                except Exception as exc:  # a verdict's exit code (FAIL 1, INCONCLUSIVE 3)
+                    if getattr(exc, "exit_code", None) in (1, 3):
+                        _took(reporter, err_console)
+                    raise
+                _took(reporter, err_console)
         finally:
             reporter.clear()
             for c in (console, err_console):

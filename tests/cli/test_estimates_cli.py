@@ -76,7 +76,13 @@ def test_a_long_command_prints_its_estimate_first(monkeypatch, tmp_path, args):
     one = re.search(r"one run of ([\d,]+) steps", est[0])
     if m:
         n, steps, cores = (int(g.replace(",", "")) for g in m.groups())
-        assert when == progress.duration(n * steps * 1e-3 / cores), est[0]
+        extra = 0.0
+        evals = re.search(r"\(([\d,]+) evaluations of", est[0])
+        if evals:  # tune: each evaluation's time beyond the kernel (api.tune.EVAL_OVERHEAD_S)
+            from ema_cli.api.tune import EVAL_OVERHEAD_S
+
+            extra = int(evals.group(1).replace(",", "")) * EVAL_OVERHEAD_S
+        assert when == progress.duration(n * steps * 1e-3 / cores + extra), est[0]
     elif one:
         assert when == progress.duration(int(one.group(1).replace(",", "")) * 1e-3), est[0]
     else:  # acceptance, freqresp: "..., 12,345,678 integration steps" on this process's cores
