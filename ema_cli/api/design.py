@@ -289,14 +289,13 @@ def _design(log: str | Path, config: ConfigSource, overrides: Overrides,
     t_all = time.perf_counter()
     log = Path(log)
     plan = _checked_inputs(log, config, overrides, tune_config, spec, budget, corners)
-    timings: dict[str, float] = {}
     with whole_estimate(*design_estimate(plan, budget)):  # the steps' estimates inside
-        return _steps(log, plan, budget, corners, say, tune_log, timings, t_all)
+        return _steps(log, plan, budget, corners, say, tune_log, t_all)
 
 
 def _steps(log: Path, plan: dict[str, Any], budget: int | None, corners: str,
            say: Callable[[str], None], tune_log: Callable[[str], None] | None,
-           timings: dict[str, float], t_all: float) -> DesignResult:
+           t_all: float) -> DesignResult:
     """The three steps of :func:`design` (identification, tuning, sign-off) -> the result."""
     from ema_cli.api.identify_logs import identify_closed_loop
     from ema_cli.api.tune import tune
@@ -304,6 +303,7 @@ def _steps(log: Path, plan: dict[str, Any], budget: int | None, corners: str,
 
     cfg, tune_path, spec_path, pairs = plan["cfg"], plan["tune_path"], plan["spec_path"], \
         plan["pairs"]
+    timings: dict[str, float] = {}
 
     say(f"1/3 identification of {log}")
     t0 = time.perf_counter()
@@ -378,7 +378,7 @@ def _checked_inputs(log: Path, config: ConfigSource, overrides: Overrides,
     id_doc = {**cfg.identify, "name": cfg.identify.get("name", cfg.name)}
     id_pairs = by["identify"] + [("data", str(log))]
     try:
-        load_config(id_doc, id_pairs, ClosedLoopSettings)
+        id_cfg = load_config(id_doc, id_pairs, ClosedLoopSettings)
     except EmaError as exc:
         raise EmaError(f"identify: {exc.message}") from None
     tune_pairs = dotted_pairs(cfg.tune) + by["tune"]
@@ -404,7 +404,8 @@ def _checked_inputs(log: Path, config: ConfigSource, overrides: Overrides,
         raise EmaError(f"spec: {exc.message}") from None
     return {"cfg": cfg, "pairs": pairs, "tune_path": tune_path, "spec_path": spec_path,
             "id_doc": id_doc, "id_pairs": id_pairs, "tune_doc": tune_doc,
-            "tune_pairs": tune_pairs, "spec_doc": spec_doc}
+            "tune_pairs": tune_pairs, "spec_doc": spec_doc,
+            "id_cfg": id_cfg, "tune_cfg": tcfg, "spec": sp}  # the three steps' configs, parsed
 
 
 def design_cases(fit: Any) -> tuple[list[tuple[str, dict[str, float], dict[str, str]]],

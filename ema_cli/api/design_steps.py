@@ -191,24 +191,18 @@ def design_estimate(plan: dict[str, Any], budget: int | None) -> tuple[float, st
     counted."""
     from ema_cli.api.identify_logs import fit_estimate
     from ema_cli.api.tune import EVAL_OVERHEAD_S
-    from ema_cli.config.acceptance import AcceptanceSpec
-    from ema_cli.config.loader import load_config
-    from ema_cli.config.tune import TuneConfig
     from ema_cli.identify.closed_loop.problem import load_log
-    from ema_cli.identify.log_settings import ClosedLoopSettings
     from ema_cli.limits import cores
     from ema_cli.progress import duration, kernel_seconds
     from ema_cli.tune.run import evaluations_for
     from ema_cli.tune.spec import SEARCH_KINDS
 
-    ids = load_config(plan["id_doc"], plan["id_pairs"], ClosedLoopSettings)
+    ids, tcfg, sp = plan["id_cfg"], plan["tune_cfg"], plan["spec"]
     length = load_log(ids.data, columns=ids.columns, window=ids.window).duration
     fit_s, _ = fit_estimate(ids, length)
-    tcfg = load_config(plan["tune_doc"], plan["tune_pairs"], TuneConfig)
     o = tcfg.optimiser
     evals = o.runs * evaluations_for(o.method, budget or o.budget, o.pop, len(tcfg.variables),
                                      o.polish, o.local)
-    sp = load_config(plan["spec_doc"], [], AcceptanceSpec)
     dt = tcfg.simulation.dt_s
     per_candidate = (len(tcfg.scenarios) * tcfg.simulation.duration_s
                      + sum(t.sim_seconds() for t in sp.tests.values()

@@ -274,18 +274,15 @@ def fit_estimate(cfg: Any, duration: float, workers: int | None = None) -> tuple
     steps = duration / cfg.dt_s
     if cfg.search == "shooting":
         passes = FIT_PASSES_PER_START * cfg.shooting.starts
-        lane_steps = passes * steps
-        what = (f"a closed-loop fit of the {duration:.3g} s log: {cfg.shooting.starts} starts, "
-                f"about {passes:,.0f} passes of {steps:,.0f} steps on {workers} core"
-                f"{'s' if workers != 1 else ''}")
+        lane_steps, first = passes * steps, f"{cfg.shooting.starts} starts,"
     else:
         ga_steps = duration / (cfg.ga_dt_s or cfg.dt_s)
         n_ga = cfg.ga.pop * cfg.ga.generations
         passes = FIT_PASSES_PER_START
         lane_steps = n_ga * ga_steps + passes * steps
-        what = (f"a closed-loop fit of the {duration:.3g} s log: GA {n_ga:,} simulations of "
-                f"{ga_steps:,.0f} steps, then about {passes:,.0f} passes of {steps:,.0f} steps "
-                f"on {workers} core{'s' if workers != 1 else ''}")
+        first = f"GA {n_ga:,} simulations of {ga_steps:,.0f} steps, then"
+    what = (f"a closed-loop fit of the {duration:.3g} s log: {first} about {passes:,.0f} "
+            f"passes of {steps:,.0f} steps on {workers} core{'s' if workers != 1 else ''}")
     return FIT_OVERHEAD * kernel_seconds(lane_steps, 1, workers), what
 
 

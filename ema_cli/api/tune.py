@@ -418,23 +418,18 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
                 f"tune: {n_evals:,} evaluations x {len(scenarios)} scenarios x {steps:.3g} steps",
                 "lower budget or runs, shorten simulation.duration_s or raise simulation.dt_s")
     if log is not None:
-        o = cfg.optimiser
         n_runs = runs or o.runs
         import os
 
         from ema_cli.progress import BIG_RUN, announce_estimate, kernel_seconds
-        from ema_cli.tune.run import evaluations_for
 
-        m, b = method or o.method, budget or o.budget
-        log(explain_budget(m, b, o.pop, len(cfg.variables), o.polish, o.local)
-            + (f"; x {n_runs} runs" if n_runs > 1 else ""))
-        evals = n_runs * evaluations_for(m, b, o.pop, len(cfg.variables), o.polish, o.local)
-        n_sims = evals * len(scenarios)
-        sim = cfg.simulation
-        steps, workers = round(sim.duration_s / sim.dt_s), os.cpu_count() or 1
-        announce_estimate(kernel_seconds(n_sims, steps, workers) + evals * EVAL_OVERHEAD_S,
-                          f"{n_sims:,} simulations of {steps:,} steps on {workers} cores "
-                          f"({evals:,} evaluations of {len(scenarios)} scenarios, "
+        log(explain_budget(method or o.method, budget or o.budget, o.pop, len(cfg.variables),
+                           o.polish, o.local) + (f"; x {n_runs} runs" if n_runs > 1 else ""))
+        n_sims = n_evals * len(scenarios)
+        n_steps, workers = round(steps), os.cpu_count() or 1
+        announce_estimate(kernel_seconds(n_sims, n_steps, workers) + n_evals * EVAL_OVERHEAD_S,
+                          f"{n_sims:,} simulations of {n_steps:,} steps on {workers} cores "
+                          f"({n_evals:,} evaluations of {len(scenarios)} scenarios, "
                           f"{1e3 * EVAL_OVERHEAD_S:g} ms each beyond the kernel; --budget, "
                           "--runs set it)", force=n_sims > BIG_RUN)
     from ema_cli.sweep.executor import executing

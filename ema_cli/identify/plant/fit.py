@@ -228,10 +228,7 @@ def run_plant(settings: PlantSettings, progress: Callable[[str, int | None, int 
     done, total)`` as it advances (default: ``ema_cli.progress.report``, what the command line
     shows)."""
     if progress is None:
-        from ema_cli.progress import report
-
-        def progress(stage: str, done: int | None, total: int | None) -> None:
-            report(stage, done, total)
+        from ema_cli.progress import report as progress
     progress("reading the record", None, None)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
