@@ -147,6 +147,66 @@ if "NUMBA_DISABLE_PERFORMANCE_WARNINGS" not in os.environ:
 
 
 
+def _serialise_cache_saves() -> None:
+    """Make numba's cache safe for several processes compiling at once.
+
+    numba's ``IndexDataCacheFile.save`` reads a function's index, picks the first data-file
+    number the index does not use, writes the index, then the data. Two processes saving two
+    overloads of one function at the same moment (two ``ema`` commands, or two test workers,
+    compiling two variants of a kernel entry point) can pick the same number: the index then
+    names one signature and the file holds the other's machine code, and every later process
+    runs a kernel of another variant without an error. Found by the interruption harness in
+    CI (the same fit gave other numbers after a neighbouring process had compiled).
+
+    Here each save holds an exclusive ``flock`` on a lock file beside the index for the
+    whole read-pick-write, and each load checks that the entry it read was compiled for the
+    signature asked for (a mismatch, e.g. in a cache written before this guard, is a miss:
+    the function is compiled again and the entry replaced)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: numba's own behaviour
+        return
+    from numba.core import caching
+
+    cls = caching.IndexDataCacheFile
+    if getattr(cls, "_ema_guarded", False):
+        return
+    save, load = cls.save, cls.load
+
+    def locked_save(self: Any, key: Any, data: Any) -> None:
+        try:
+            lock = open(self._index_path + ".lock", "a")  # noqa: SIM115 (held across save)
+        except OSError:  # an unwritable cache: numba's save fails or skips as it would
+            return save(self, key, data)
+        with lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            return save(self, key, data)
+
+    def checked_load(self: Any, key: Any) -> Any:
+        data = load(self, key)
+        if data is not None and not entry_matches(key, data):
+            return None
+        return data
+
+    cls.save, cls.load = locked_save, checked_load
+    cls._ema_guarded = True
+
+
+def entry_matches(key: Any, data: Any) -> bool:
+    """Whether a numba cache entry read back (``data``: a reduced compile result, whose fourth
+    item is its signature) was compiled for the index ``key`` (whose first item is the
+    argument types). Entries of another shape are not judged (True)."""
+    try:
+        sig = data[3]
+        args = sig.args
+    except (TypeError, IndexError, AttributeError):
+        return True
+    return tuple(args) == tuple(key[0])
+
+
+_serialise_cache_saves()
+
+
 def _defer_blas_probe() -> None:
     """Import ``numba.np.arraymath`` without its BLAS probe (a 0.3 s ``import scipy.linalg``).
 
@@ -173,4 +233,4 @@ def _defer_blas_probe() -> None:
 
 _defer_blas_probe()
 
-__all__ = ["CACHE_KEY", "literally", "njit", "prange", "source_key"]
+__all__ = ["CACHE_KEY", "entry_matches", "literally", "njit", "prange", "source_key"]
