@@ -250,35 +250,41 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
                        "of it with window (T0, T1) [s], or raise dt_s") from None
 
 
-FIT_PASSES_PER_START = 440.0
-"""Kernel work of a multiple-shooting fit, in passes over the whole log at ``dt_s`` per start
-(the lengthening stages, Jacobians, intervals and profile included): 1.42e9 lane-steps for
-the README's 4 s example (`ema identify --make-data closed-loop --noise 1`, then the fit) at
-8 starts, 2026-11-27."""
-FIT_OVERHEAD = 3.0
-"""A fit's wall time over its kernel time at ``progress.CPU_S_PER_STEP`` on 2 idle cores (the
-least-squares algebra of the segments, the verdict's checks): 54 s for the README's 4 s
-example (3.5x), 17.6 s for design's 2 s log (2.3x), 2026-11-27."""
+FIT_PASSES_FIXED = 2300.0
+"""Kernel work of a multiple-shooting fit that does not grow with the starts, in passes over
+the whole log at ``dt_s``: the finishing candidates' lengthening, the refinement at the fine
+step, the contact restart, the polish, the intervals and the profile."""
+FIT_PASSES_PER_START = 157.0
+"""Kernel work per multiple-shooting start, in passes over the log at ``dt_s`` (the start
+states and the joint search). Both from the kernel's lane-step tally of the README's 4 s
+example (`ema identify --make-data closed-loop --noise 1`, then the fit) at 2, 4 and 8
+starts: 1.046e9, 1.138e9 and 1.422e9 lane-steps of 400,000-step passes, 2026-11-27 (the
+earlier model, 440 passes per start and nothing fixed, put 2 starts at 12 s for 45 s)."""
+FIT_OVERHEAD = 3.5
+"""A fit's wall time over its kernel time at ``progress.CPU_S_PER_STEP`` on 2 cores (the
+least-squares algebra of the segments, the verdict's checks, the kernel's own speed on these
+variants): the README's 4 s example took 44.8, 46.5 and 55.8 s at 2, 4 and 8 starts for
+40, 43 and 54 s estimated, 2026-11-27."""
 
 
 def fit_estimate(cfg: Any, duration: float, workers: int | None = None) -> tuple[float, str]:
     """The estimated time [s] of a closed-loop fit of a ``duration`` [s] log with settings
     ``cfg`` (``ClosedLoopSettings``) and what it counts: the kernel work at
-    ``progress.CPU_S_PER_STEP`` (``FIT_PASSES_PER_START`` passes over the log per shooting
-    start; the GA search: its population times generations at ``ga_dt_s``, then the polish),
-    times ``FIT_OVERHEAD``."""
+    ``progress.CPU_S_PER_STEP`` (:data:`FIT_PASSES_FIXED` passes over the log, plus
+    :data:`FIT_PASSES_PER_START` per shooting start; the GA search: its population times
+    generations at ``ga_dt_s``, then the fixed passes), times :data:`FIT_OVERHEAD`."""
     from ema_cli.limits import cores
     from ema_cli.progress import kernel_seconds
 
     workers = cores() if workers is None else workers
     steps = duration / cfg.dt_s
     if cfg.search == "shooting":
-        passes = FIT_PASSES_PER_START * cfg.shooting.starts
+        passes = FIT_PASSES_FIXED + FIT_PASSES_PER_START * cfg.shooting.starts
         lane_steps, first = passes * steps, f"{cfg.shooting.starts} starts,"
     else:
         ga_steps = duration / (cfg.ga_dt_s or cfg.dt_s)
         n_ga = cfg.ga.pop * cfg.ga.generations
-        passes = FIT_PASSES_PER_START
+        passes = FIT_PASSES_FIXED
         lane_steps = n_ga * ga_steps + passes * steps
         first = f"GA {n_ga:,} simulations of {ga_steps:,.0f} steps, then"
     what = (f"a closed-loop fit of the {duration:.3g} s log: {first} about {passes:,.0f} "
