@@ -312,13 +312,13 @@ class ClosedLoopProblem:
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         grid = make_grid(self.log.t, dt, X.shape[0])
         P = self.rows(X)
+        idx = [SIG[CHANNELS[c][0]] for c in self.channels]
         res = simulate_batch(P, [self._reference(dt, grid.n_steps)], None, dt, grid.n_steps,
-                             grid.dec, parallel=True)
+                             grid.dec, parallel=True, n_signals=max(idx) + 1)  # what is read
         self.evaluations += X.shape[0]
         self.kernel_steps += X.shape[0] * grid.n_steps
         self.kernel_s += res.kernel_s
         sig = res.signals
-        idx = [SIG[CHANNELS[c][0]] for c in self.channels]
         if grid.index is not None:
             Y = sig[:, grid.index, :][:, :, idx].transpose(0, 2, 1)
         else:

@@ -241,14 +241,16 @@ class ShootingProblem:
         from ema_cli.sim.tables import SIG
 
         plan = self._plan(dt)
+        ch = [SIG[CHANNELS[c][0]] for c in self.base.channels]
+        st = [SIG[s] for s in _SIG_OF_STATE]
+        # only the first signals up to the last one read here are recorded (8 of the 17-21):
+        # the kernel writes and the runner allocates less, the values are the same bits
         res = simulate_batch(rows, plan["refs"], seg_of_row, dt, plan["n_steps"], plan["dec"],
-                             parallel=True)
+                             parallel=True, n_signals=max(ch + st) + 1)
         self.evaluations += rows.shape[0]
         self.kernel_steps += rows.shape[0] * plan["n_steps"]
         self.kernel_s += res.kernel_s
         sig = res.signals
-        ch = [SIG[CHANNELS[c][0]] for c in self.base.channels]
-        st = [SIG[s] for s in _SIG_OF_STATE]
         if plan["index"] is not None:
             idx = plan["pad_index"][seg_of_row]  # [rows, L]
             r_ = np.arange(rows.shape[0])[:, None]
