@@ -162,6 +162,8 @@ def _serialise_cache_saves() -> None:
     whole read-pick-write, and each load checks that the entry it read was compiled for the
     signature asked for (a mismatch, e.g. in a cache written before this guard, is a miss:
     the function is compiled again and the entry replaced)."""
+    import contextlib
+
     try:
         import fcntl
     except ImportError:  # not POSIX: numba's own behaviour
@@ -179,7 +181,9 @@ def _serialise_cache_saves() -> None:
         except OSError:  # an unwritable cache: numba's save fails or skips as it would
             return save(self, key, data)
         with lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+            # a file system without locks (some network mounts): numba's own, unguarded save
+            with contextlib.suppress(OSError):
+                fcntl.flock(lock, fcntl.LOCK_EX)
             return save(self, key, data)
 
     def checked_load(self: Any, key: Any) -> Any:

@@ -31,9 +31,9 @@ def test_a_save_holds_an_exclusive_lock_beside_the_index(tmp_path):
     real = cf._save_data
 
     def probe(name, data):
-        with open(cf._index_path + ".lock", "a") as other:  # another open file description
-            with pytest.raises(BlockingIOError):
-                fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        # another open file description of the lock file cannot take it meanwhile
+        with open(cf._index_path + ".lock", "a") as other, pytest.raises(BlockingIOError):
+            fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
         seen.append(name)
         real(name, data)
 
@@ -86,3 +86,13 @@ def test_entry_matches_judges_only_compile_results():
     assert en.entry_matches(_key(types.int64), _payload(types.int64))
     assert not en.entry_matches(_key(types.int64), _payload(types.float64))
     assert en.entry_matches(_key(types.int64), ("a library", b"bytes"))  # another kind
+
+
+def test_a_file_system_without_locks_still_saves(tmp_path, monkeypatch):
+    def no_locks(*_a):
+        raise OSError(37, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    cf = caching.IndexDataCacheFile(str(tmp_path), "f-1.py311", ("stamp", 1))
+    cf.save(_key(types.int64), _payload(types.int64))
+    assert cf.load(_key(types.int64))[3].args == (types.int64,)
