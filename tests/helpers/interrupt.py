@@ -207,6 +207,20 @@ def differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
 
 
 # ------------------------------------------------------------------ the check
+def _fresh_run(case: Case, work: Path, ref: dict[str, Any], k: int) -> str:
+    """For a failure message: whether one more uninterrupted run, into a new folder, gives
+    the reference's results (a defect of resuming) or not (the command's results differ
+    from process to process)."""
+    out = f"fresh{k:02d}"
+    code, _, err = run(case, work, out)
+    if code not in (0, 1, 3):
+        return f"a fresh uninterrupted run exited {code}: {err[-500:]}"
+    diff = differences(ref, snapshot(work / out))
+    return ("a fresh uninterrupted run gives the reference's results (a defect of resuming)"
+            if not diff else f"a fresh uninterrupted run differs too ({diff}): the command's "
+            "results differ from process to process, whatever the interruption")
+
+
 def check_case(case: Case, work: Path, instants: int | None = None) -> list[Attempt]:
     """Run ``case`` uninterrupted twice, then interrupted at ``instants`` instants (default
     the case's) and again; AssertionError naming the instant and signal on any failure."""
@@ -239,6 +253,7 @@ def check_case(case: Case, work: Path, instants: int | None = None) -> list[Atte
         assert again == code, f"{where}, then again: exit {again}: {err[-2000:]}"
         assert state_of(case, work / out) == "finished", f"{where}, then again: unfinished"
         diff = differences(ref, snapshot(work / out))
-        assert not diff, f"{where}, then again: results differ from a whole run: {diff}"
+        assert not diff, (f"{where} (folder then {state}), then again: results differ from a "
+                          f"whole run: {diff}; {_fresh_run(case, work, ref, k)}")
         attempts.append(Attempt(delay, sig.name, got, state, again, seconds))
     return attempts
