@@ -131,6 +131,7 @@ def njit(*args: Any, entry: bool = False, **kwargs: Any) -> Any:
                "no_cfunc_wrapper": True}
 
     def wrap(func: Any) -> Any:
+        _INNER_FUNCS.add(func)
         disp = InnerDispatcher(py_func=func, locals={}, targetoptions=options)
         if cache:
             disp.enable_caching()
@@ -209,6 +210,93 @@ def entry_matches(key: Any, data: Any) -> bool:
 
 
 _serialise_cache_saves()
+
+
+INNER_KIND = "ema-inner"
+"""How an inner function's compiled library is cached: its optimised LLVM bitcode, no machine
+code (:func:`_inner_code_without_machine_code`)."""
+_INNER_FUNCS: set[Any] = set()  # the Python functions of the InnerDispatchers
+
+
+def _inner_code_without_machine_code() -> None:
+    """Compile an inner function (:class:`InnerDispatcher`) to optimised LLVM IR only.
+
+    numba turns every compiled function's own module into machine code, although the IR of an
+    inner function is only ever linked into its callers' modules (and optimised and emitted
+    there, inlined). Here an inner function's library is optimised as before (so its callers
+    see the same IR and compile to the same machine code, bit for bit) but never handed to the
+    execution engine, and the cache keeps its bitcode (:data:`INNER_KIND`) instead of an object
+    file. Its environment pointer, never read by a function that touches no Python object, is
+    left unset. A call from Python runs the twin (:class:`InnerDispatcher`), which has machine
+    code of its own."""
+    from llvmlite import binding as ll
+    from numba.core import codegen as cg
+    from numba.core.typed_passes import BaseNativeLowering
+
+    if getattr(BaseNativeLowering, "_ema_inner_patched", False):
+        return
+    run_pass = BaseNativeLowering.run_pass
+
+    def lowering(self: Any, state: Any) -> Any:
+        if (state.library is None and state.flags.no_cpython_wrapper
+                and state.func_id.func in _INNER_FUNCS):  # not the twin: it has wrappers
+            lib = state.targetctx.codegen().create_library(state.func_id.func_qualname)
+            lib.enable_object_caching()
+            lib._ema_inner = True
+            state.library = lib
+        return run_pass(self, state)
+
+    lib_cls = cg.JITCodeLibrary
+    finalize_module = lib_cls._finalize_final_module
+    pointer = lib_cls.get_pointer_to_function
+    serialise = lib_cls.serialize_using_object_code
+    unserialise = lib_cls._unserialize.__func__
+
+    def _finalize_final_module(self: Any) -> None:
+        if not getattr(self, "_ema_inner", False):
+            return finalize_module(self)
+        self._finalize_dynamic_globals()
+        self._verify_declare_only_symbols()
+        self._finalized = True
+
+    def get_pointer_to_function(self: Any, name: str) -> int:
+        if not getattr(self, "_ema_inner", False):
+            return pointer(self, name)
+        self._ensure_finalized()
+        return 0  # no machine code: no wrapper (its callers inline or link its IR)
+
+    def serialize_using_object_code(self: Any) -> tuple:
+        if not getattr(self, "_ema_inner", False):
+            return serialise(self)
+        self._ensure_finalized()
+        return (self.name, INNER_KIND, self._get_module_for_linking().as_bitcode())
+
+    def _unserialize(cls: Any, codegen: Any, state: tuple) -> Any:
+        name, kind, data = state
+        if kind != INNER_KIND:
+            return unserialise(cls, codegen, state)
+        self = codegen.create_library(name)
+        self._ema_inner = True
+        self._final_module = ll.parse_bitcode(data)
+        self._finalize_final_module()
+        return self
+
+    set_env = cg.JITCPUCodegen.set_env
+
+    def set_env_if_emitted(self: Any, env_name: str, env: Any) -> None:
+        if self._engine.get_global_value_address(env_name):
+            set_env(self, env_name, env)
+
+    BaseNativeLowering.run_pass = lowering
+    lib_cls._finalize_final_module = _finalize_final_module
+    lib_cls.get_pointer_to_function = get_pointer_to_function
+    lib_cls.serialize_using_object_code = serialize_using_object_code
+    lib_cls._unserialize = classmethod(_unserialize)
+    cg.JITCPUCodegen.set_env = set_env_if_emitted
+    BaseNativeLowering._ema_inner_patched = True
+
+
+_inner_code_without_machine_code()
 
 
 def _defer_blas_probe() -> None:

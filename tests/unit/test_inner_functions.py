@@ -79,3 +79,71 @@ def test_no_command_calls_an_inner_function_from_python(tmp_path):
                        text=True, timeout=600)
     assert r.returncode in (0, 1, 3), r.stderr
     assert not log.exists(), log.read_text()
+
+
+_INNER_MODULE = '''
+import numpy as np
+from ema_cli._numba import njit
+
+@njit(cache=True)
+def inner(x):
+    if x < 0:
+        raise ValueError("negative input")
+    a = np.empty(3)
+    a[:] = x
+    return a.sum()
+
+@njit(cache=True, entry=True)
+def outer(x):
+    return inner(x) + 1.0
+'''
+_LATER_MODULE = '''
+from ema_cli._numba import njit
+from inner_mod import inner
+
+@njit(cache=True, entry=True)
+def later(x):
+    return inner(x) * 3.0
+'''
+_CHECK = '''
+import sys, {mod}
+f = {mod}.{fn}
+print(f(2.0))
+try:
+    f(-1.0)
+except ValueError as e:
+    print("raised", e)
+print({mod}.inner(1.0) if "{mod}" == "inner_mod" else "")
+'''
+
+
+def test_inner_code_is_cached_as_ir_and_links_into_a_later_entry(tmp_path):
+    """An inner function gets no machine code of its own (``_inner_code_without_machine_code``):
+    its cache entry is its optimised IR (no object file), an entry compiled in the same
+    process runs it, raises its exception and is cached; a later process compiles another
+    entry point against the inner function read back from the cache, and a third loads both
+    entry points from the cache; a call from Python runs the twin."""
+    from ema_cli._numba import INNER_KIND
+
+    (tmp_path / "inner_mod.py").write_text(_INNER_MODULE)
+    (tmp_path / "later_mod.py").write_text(_LATER_MODULE)
+    env = {**os.environ, "EMA_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path)])}
+    env.pop("NUMBA_DISABLE_JIT", None)
+
+    def run(mod: str, fn: str) -> list[str]:
+        r = subprocess.run([sys.executable, "-c", _CHECK.format(mod=mod, fn=fn)], env=env,
+                           capture_output=True, text=True, timeout=300, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return r.stdout.split("\n")
+
+    assert run("inner_mod", "outer")[:3] == ["7.0", "raised negative input", "3.0"]
+    data = sorted((tmp_path / "cache").rglob("inner_mod.inner-*.nbc"))
+    assert len(data) == 1
+    raw = data[0].read_bytes()  # (unpickling it needs the module: read the bytes)
+    assert INNER_KIND.encode() in raw and b"\x7fELF" not in raw  # IR, no object file
+    assert b"\x7fELF" in next((tmp_path / "cache").rglob("inner_mod.outer-*.nbc")).read_bytes()
+    assert run("later_mod", "later")[:2] == ["18.0", "raised negative input"]
+    assert sorted((tmp_path / "cache").rglob("later_mod.later-*.nbc"))
+    assert run("later_mod", "later")[:2] == ["18.0", "raised negative input"]  # from the cache
+    assert run("inner_mod", "outer")[:3] == ["7.0", "raised negative input", "3.0"]
