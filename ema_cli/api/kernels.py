@@ -3,7 +3,8 @@
 The units are ``sim.compiled.kernel_units`` (each kernel entry point in each variant) and the
 identification kernels. Units not cached yet are compiled in up to ``jobs`` processes, one per
 family of units that share compiled callees and numba's index files (one lane, SIMD lanes,
-identification), so no two processes write one index file.
+identification), so what a family shares is compiled once. Other processes may compile into the
+same cache at the same time: its saves are serialised (``ema_cli._numba``).
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ def compile_unit(name: str, quiet: bool = False) -> float:
 
 
 def family(name: str) -> str:
-    """The units that share compiled callees and one numba index file: one process each."""
+    """The units that share compiled callees (and an entry point's index file): one process
+    each."""
     return name.split("/")[0].split("-")[0]
 
 
