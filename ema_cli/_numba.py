@@ -229,8 +229,7 @@ def _inner_code_without_machine_code() -> None:
     file. Its environment pointer, never read by a function that touches no Python object, is
     left unset. A call from Python runs the twin (:class:`InnerDispatcher`), which has machine
     code of its own."""
-    from llvmlite import binding as ll
-    from numba.core import codegen as cg
+    from numba.core import codegen as cg  # its llvmlite binding: cg.ll (numba's own pin)
     from numba.core.typed_passes import BaseNativeLowering
 
     if getattr(BaseNativeLowering, "_ema_inner_patched", False):
@@ -277,7 +276,7 @@ def _inner_code_without_machine_code() -> None:
             return unserialise(cls, codegen, state)
         self = codegen.create_library(name)
         self._ema_inner = True
-        self._final_module = ll.parse_bitcode(data)
+        self._final_module = cg.ll.parse_bitcode(data)
         self._finalize_final_module()
         return self
 
