@@ -156,8 +156,8 @@ def _serialise_cache_saves() -> None:
     overloads of one function at the same moment (two ``ema`` commands, or two test workers,
     compiling two variants of a kernel entry point) can pick the same number: the index then
     names one signature and the file holds the other's machine code, and every later process
-    runs a kernel of another variant without an error. Found by the interruption harness in
-    CI (the same fit gave other numbers after a neighbouring process had compiled).
+    runs a kernel of another variant without an error (the one cross-process path found for a
+    CI run in which the same fit gave other numbers; that it was the cause is not proven).
 
     Here each save holds an exclusive ``flock`` on a lock file beside the index for the
     whole read-pick-write, and each load checks that the entry it read was compiled for the

@@ -190,7 +190,7 @@ def design_estimate(plan: dict[str, Any], budget: int | None) -> tuple[float, st
     integration steps); the corners run only while they can change the verdict and are not
     counted."""
     from ema_cli.api.identify_logs import fit_estimate
-    from ema_cli.api.tune import EVAL_OVERHEAD_S
+    from ema_cli.api.tune import tuning_seconds
     from ema_cli.identify.closed_loop.problem import load_log
     from ema_cli.limits import cores
     from ema_cli.progress import duration, kernel_seconds
@@ -209,7 +209,7 @@ def design_estimate(plan: dict[str, Any], budget: int | None) -> tuple[float, st
                            if t.test in SEARCH_KINDS)) / dt
     battery = sum(t.sim_seconds() for t in sp.tests.values()) / dt
     workers = cores()
-    tune_s = kernel_seconds(evals * per_candidate, 1, workers) + evals * EVAL_OVERHEAD_S
+    tune_s = tuning_seconds(evals, per_candidate, workers)
     sign_s = kernel_seconds(battery, 1, workers)
     return fit_s + tune_s + sign_s, (
         f"identification {duration(fit_s)}, tuning {duration(tune_s)} ({evals:,} "

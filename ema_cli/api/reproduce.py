@@ -76,13 +76,12 @@ class ReproduceResult:
 
 
 def _announce_tuning(cfg: Any, n_scenarios: int, tid: str) -> None:
-    """Add a threshold's tuning to the command's estimate (the cost model of ``ema tune``:
-    its evaluations x its scenarios at ``progress.CPU_S_PER_STEP``, plus
-    ``api.tune.EVAL_OVERHEAD_S`` per evaluation); before, the reproduction's estimate left the
-    tuning out (``took 1 min 10 s (estimated ~14 s)`` in CI)."""
-    from ema_cli.api.tune import EVAL_OVERHEAD_S
+    """Add a threshold's tuning to the command's estimate (``api.tune.tuning_seconds``, the
+    cost model of ``ema tune``); before, the reproduction's estimate left the tuning out
+    (``took 1 min 10 s (estimated ~14 s)`` in CI)."""
+    from ema_cli.api.tune import tuning_seconds
     from ema_cli.limits import cores
-    from ema_cli.progress import announce_estimate, kernel_seconds
+    from ema_cli.progress import announce_estimate
     from ema_cli.tune.run import evaluations_for
 
     o = cfg.optimiser
@@ -90,8 +89,7 @@ def _announce_tuning(cfg: Any, n_scenarios: int, tid: str) -> None:
                                        o.local)
     steps = round(cfg.simulation.duration_s / cfg.simulation.dt_s)
     workers = cores()
-    announce_estimate(kernel_seconds(n_evals * n_scenarios, steps, workers)
-                      + n_evals * EVAL_OVERHEAD_S,
+    announce_estimate(tuning_seconds(n_evals, steps * n_scenarios, workers),
                       f"the tuning for threshold {tid}: {n_evals:,} evaluations of "
                       f"{n_scenarios} scenarios of {steps:,} steps on {workers} cores")
 

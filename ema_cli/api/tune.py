@@ -358,6 +358,16 @@ optimiser's bookkeeping, the spec's measurements): 13.5 ms for `ema tune configs
 README's design line, 2026-11-27 [s]."""
 
 
+def tuning_seconds(n_evals: int, steps_per_eval: float, workers: int) -> float:
+    """The estimated time [s] of a tuning: ``n_evals`` evaluations of ``steps_per_eval``
+    integration steps each (its scenarios, and the spec's tests it measures) on ``workers``
+    cores at ``progress.CPU_S_PER_STEP``, plus :data:`EVAL_OVERHEAD_S` per evaluation: the
+    cost model of ``ema tune``, ``ema design`` and ``ema reproduce``'s threshold tunings."""
+    from ema_cli.progress import kernel_seconds
+
+    return kernel_seconds(n_evals, steps_per_eval, workers) + n_evals * EVAL_OVERHEAD_S
+
+
 def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | None = None,
          runs: int | None = None, budget: int | None = None, spec: ConfigSource = None,
          progress: Callable[[int, int, int], None] | None = None,
@@ -421,13 +431,13 @@ def tune(config: ConfigSource, overrides: Overrides = None, *, method: str | Non
         n_runs = runs or o.runs
         import os
 
-        from ema_cli.progress import BIG_RUN, announce_estimate, kernel_seconds
+        from ema_cli.progress import BIG_RUN, announce_estimate
 
         log(explain_budget(method or o.method, budget or o.budget, o.pop, len(cfg.variables),
                            o.polish, o.local) + (f"; x {n_runs} runs" if n_runs > 1 else ""))
         n_sims = n_evals * len(scenarios)
         n_steps, workers = round(steps), os.cpu_count() or 1
-        announce_estimate(kernel_seconds(n_sims, n_steps, workers) + n_evals * EVAL_OVERHEAD_S,
+        announce_estimate(tuning_seconds(n_evals, n_steps * len(scenarios), workers),
                           f"{n_sims:,} simulations of {n_steps:,} steps on {workers} cores "
                           f"({n_evals:,} evaluations of {len(scenarios)} scenarios, "
                           f"{1e3 * EVAL_OVERHEAD_S:g} ms each beyond the kernel; --budget, "
