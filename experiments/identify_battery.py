@@ -62,12 +62,16 @@ def fit_one(path: Path, plant: dict, starts: int, lengthen: list[float] | None =
         shooting["lengthen_s"] = lengthen
     extra = {} if command is None else {"command": command}
     settings = ClosedLoopSettings(plant=plant, shooting=shooting, profile_points=5, **extra)
-    t0 = time.perf_counter()
+    from ema_cli.sim.runner import TALLY
+
+    t0, steps0 = time.perf_counter(), TALLY["lane_steps"]
     fit = run_closed_loop(settings, log)
     wall = time.perf_counter() - t0
+    lane_steps = TALLY["lane_steps"] - steps0
     js = fit.to_json()
     extra = {f"{n}_est": float(fit.x[j]) for j, n in enumerate(fit.names) if n not in NAMES}
-    row: dict = {"wall_s": wall, "confirmed": js["optimum"]["confirmed"], **extra,
+    row: dict = {"wall_s": wall, "lane_steps": lane_steps,
+                 "confirmed": js["optimum"]["confirmed"], **extra,
                  "J_over_N": fit.shooting.search.cost / fit.problem.measured.size,
                  "agree": fit.shooting.search.agree,
                  "max_ratio": max(js["fit_quality"]["rms_over_scale"].values()),

@@ -36,6 +36,19 @@ cost by more than this many residuals' worth [-]: measured on two battery logs, 
 repeated re-seats of a start moved the cost by less than 0.2 residuals' worth (the other 6 by
 2.1 to 9.5, which still go on), each one a full re-fit of every segment (1.1 s at the search's
 step, 4.7 s at the fine one for a 4 s log)."""
+JAC_EVERY = 2
+"""A start's finite-difference Jacobian is computed every this many LM iterations, and
+carried along the accepted steps between (:func:`broyden`) [-]. The Jacobian is 1 + p + NV
+kernel lanes per segment (11 to 14), a trial step one."""
+STALL_WINDOW = 3
+STALL_CHI2 = 0.1
+"""A start has stopped moving when its cost fell by less than :data:`STALL_CHI2` residuals'
+worth (chi-square units at the noise level: a tenth of one, where a parameter's standard error
+is one) over its last :data:`STALL_WINDOW` iterations, whatever the damping [-]. Measured on
+the README's example and an unstated battery log: the lengthening and the refinement ran to
+their caps (20, 15 iterations) and the search's last round to its 60 creeping down by 0.01 to
+0.05 residuals' worth an iteration (a step that is not nearly Gauss-Newton never stopped a
+start), 0.2 to 0.4 of one in all over the last 10 to 30 iterations."""
 
 
 STATE_BAND = 2 * NV - 1
@@ -128,13 +141,41 @@ def reseat(sp: ShootingProblem, st: LMState, dt: float, which: np.ndarray,
     st.cost[which] = np.sum(R**2, axis=1)
 
 
+def broyden(sp: ShootingProblem, jac: tuple[np.ndarray, np.ndarray, np.ndarray],
+            dv: np.ndarray, dr: np.ndarray) -> None:
+    """Carry a start's compact Jacobian ``jac = (r, Jx, Js)`` (:meth:`ShootingProblem.
+    jacobian_many`) along its step ``dv`` (scaled unknowns) that changed the residuals by
+    ``dr``, in place: Schubert's sparse Broyden update, one secant condition per segment (a
+    segment's data residuals depend on the parameters and its own states only, so each
+    segment's rows take the rank-one correction of its own part of the step, and the compact
+    structure stays). The tie's rows keep their parameter columns (their state columns are
+    analytic: :meth:`ShootingProblem.tie_state_jacobian`)."""
+    p, nd = sp.p, sp.n_data
+    _, Jx, Js = jac
+    owner = np.tile(sp._gather()[0], len(sp.base.channels))
+    dp = dv[:p]
+    dS = dv[p:].reshape(sp.seg.n, NV)
+    dSr = dS[owner]  # [nd, NV]: each data row's own segment's state step
+    err = dr[:nd] - Jx[:nd] @ dp - np.einsum("ik,ik->i", Js[:nd], dSr)
+    norm = float(dp @ dp) + np.sum(dS**2, axis=1)
+    w = np.where(norm[owner] > 0.0, err / np.where(norm[owner] > 0.0, norm[owner], 1.0), 0.0)
+    Jx[:nd] += w[:, None] * dp[None, :]
+    Js[:nd] += w[:, None] * dSr
+
+
 def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
             reseat_every: int = 5, tol: float = 1e-9, chi2_tol: float = CHI2_TOL,
-            progress: Any = None, stall_ratio: float = 0.0) -> LMState:
+            progress: Any = None, stall_ratio: float = 0.0,
+            stall_chi2: float = STALL_CHI2, jac_every: int = JAC_EVERY) -> LMState:
     """Levenberg-Marquardt on the free parameters and every segment state together, for all
     active starts at once: per iteration ONE kernel call for all their Jacobians and one per
     round of trial steps (each start with its own damping, Marquardt's diagonal scaling;
-    parameters clipped to their bounds). Every ``reseat_every`` iterations the segment
+    parameters clipped to their bounds). A start's Jacobian is computed by finite differences
+    every ``jac_every`` iterations (:data:`JAC_EVERY`) and carried along its accepted steps in
+    between (:func:`broyden`); an iteration on a carried Jacobian that finds no step, or a
+    step that would stop the start, hands the decision to a fresh Jacobian in the next
+    (with the damping as it was), so a start stops, stalls or is re-seated only on a fresh
+    one, as before. Every ``reseat_every`` iterations the segment
     states are re-seated (:func:`reseat`). A start stops when no damping lowers its cost or
     its relative decrease is below ``tol``, or when a nearly Gauss-Newton step (damping at
     most :data:`GN_LAMBDA`) lowers it by less than ``chi2_tol`` residuals' worth (``chi2_tol
@@ -143,11 +184,15 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
     stalled start is re-seated once (``stall_ratio`` 0: every segment, also from the data's
     reconstructions; else the segments above ``stall_ratio`` x the median segment's cost) and
     goes on only if that lowered its cost by more than :data:`STALL_MOVE_CHI2` residuals'
-    worth."""
+    worth. A start whose cost fell by less than ``stall_chi2`` residuals' worth over its last
+    :data:`STALL_WINDOW` iterations of this call stops too (:data:`STALL_CHI2`)."""
     p = sp.p
     n_res = max(sp.base.measured.size, 1)
     lo = np.concatenate([np.zeros(p), np.full(sp.n_vars - p, -np.inf)])
     hi = np.concatenate([np.ones(p), np.full(sp.n_vars - p, np.inf)])
+    trace = [st.cost.copy()]  # each start's cost before this call's iterations, after each
+    jac: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # per start (r, Jx, Js)
+    since = np.full(st.V.shape[0], jac_every)  # iterations since its Jacobian was computed
     for it in range(1, max_iter + 1):
         act = np.flatnonzero(st.active)
         if act.size == 0:
@@ -158,8 +203,17 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
             moved = c2 < st.cost[act]
             st.V[act[moved]], st.R[act[moved]], st.cost[act[moved]] = (V2[moved], R2[moved],
                                                                       c2[moved])
-        R0, Jx, Js = sp.jacobian_many(st.V[act], dt)
-        AG = [sp.normal_equations(R0[q], Jx[q], Js[q], st.V[act[q]]) for q in range(act.size)]
+            since[act] = jac_every  # the states moved: a Jacobian of their own
+        fresh_now = since[act] >= jac_every
+        need = act[fresh_now]
+        if need.size:
+            R0, Jx, Js = sp.jacobian_many(st.V[need], dt)
+            for q, i in enumerate(need):
+                jac[i] = (R0[q], Jx[q], Js[q])
+            since[need] = 0
+        lam_was_it = st.lam.copy()
+        AG = [sp.normal_equations(jac[i][0] if f else st.R[i], jac[i][1], jac[i][2], st.V[i])
+              for i, f in zip(act, fresh_now, strict=True)]
         A = np.array([a for a, _ in AG])
         g = np.array([b for _, b in AG])
         d = np.einsum("ijj->ij", A).copy()
@@ -184,14 +238,25 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
                 if ct[k] < st.cost[i]:
                     rel = (st.cost[i] - ct[k]) / max(st.cost[i], 1e-300)
                     lam_was = st.lam[i]
+                    if jac_every > 1:  # the Jacobian carried to the new point
+                        broyden(sp, jac[i], trials[k] - st.V[i], Rt[k] - st.R[i])
                     st.V[i], st.R[i], st.cost[i] = trials[k], Rt[k], ct[k]
                     st.lam[i] = max(st.lam[i] / LM_DOWN, 1e-12)
                     if rel < tol or (lam_was <= GN_LAMBDA and rel * n_res < chi2_tol):
-                        st.active[i] = False
+                        if fresh_now[q]:
+                            st.active[i] = False
+                        else:  # judged on an updated Jacobian: a fresh one decides
+                            since[i] = jac_every
                 else:
                     st.lam[i] *= LM_UP
                     still.append(q)
             pending = still
+        if pending:  # on an updated Jacobian: a fresh one, the damping as it was
+            upd = np.array([not fresh_now[q] for q in pending])
+            late = act[np.array(pending)[upd]] if np.any(upd) else np.zeros(0, dtype=int)
+            st.lam[late] = lam_was_it[late]
+            since[late] = jac_every
+            pending = [q for q in pending if fresh_now[q]]
         if pending:  # no damping lowered the cost: re-seat every segment state once first
             stuck = act[np.array(pending)]
             fresh = stuck[~st.reseated[stuck]]
@@ -200,6 +265,7 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
             if fresh.size:
                 st.V[fresh], st.R[fresh], st.cost[fresh] = chain_seat(sp, st.V[fresh], dt)
             st.reseated[fresh] = True
+            since[fresh] = jac_every
             for i, c in zip(fresh, before, strict=True):
                 if c - st.cost[i] > max(1e-6 * c, STALL_MOVE_CHI2 * c / n_res):
                     st.lam[i] = 1e-3
@@ -208,6 +274,11 @@ def lm_many(sp: ShootingProblem, st: LMState, dt: float, max_iter: int,
                     st.active[i] = False
             st.active[stuck[st.reseated[stuck] & ~np.isin(stuck, fresh)]] = False
         st.iterations[act] += 1
+        since[act] += 1
+        trace.append(st.cost.copy())
+        if stall_chi2 > 0.0 and len(trace) > STALL_WINDOW:
+            fell = trace[-1 - STALL_WINDOW][act] - st.cost[act]
+            st.active[act[fresh_now & (fell < stall_chi2 * st.cost[act] / n_res)]] = False
         st.history.append(st.cost.copy())
         if progress is not None:
             progress(it, max_iter, float(np.min(st.cost)))

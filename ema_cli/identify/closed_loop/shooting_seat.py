@@ -25,7 +25,16 @@ from ema_cli.model.params import to_row
 LM_LAMBDA0 = 1e-3  # initial Levenberg-Marquardt damping of the per-segment state fits [-]
 GAP_STARTS = (-1.0, -0.5, 0.0, 0.5, 1.0)  # starting gap positions q of a state fit [-]
 LOCAL_FIT_HALF = 5  # samples each side of the local quadratic fits of a reconstruction [-]
-PRUNE_AFTER = 3  # state-fit iterations of every start across the gap before the best goes on [-]
+PRUNE_AFTER = 1
+"""State-fit iterations of every start across the gap before only the best goes on [-]. Each
+of the ten starts of a segment costs 1 + NV kernel lanes per iteration, so at 3 (until this
+release) the first iterations were 77 % of the start states' kernel work; measured on the
+README's example, pruning after 1 left the eight starts' seated costs J/N 0.27 to 3.4 (after
+3: 0.27 to 1040) for 52 % of the work (1.12e8 lane-steps against 2.15e8)."""
+STATE_CHI2 = 0.01
+"""A lane of :func:`fit_states` (a segment's state from one start) has converged when a step
+lowers its cost by less than this many residuals' worth at its noise level [-]: it is no
+longer simulated (each lane's fit is its own, so the others are the same bits)."""
 
 
 def _local_fit(t: np.ndarray, y: np.ndarray, at: np.ndarray, half: int = LOCAL_FIT_HALF
@@ -109,7 +118,8 @@ def fit_states(sp: ShootingProblem, X: np.ndarray, S0: np.ndarray, group: np.nda
     SI, data cost [G, n_seg]). Levenberg-Marquardt with one damping per (instance, segment);
     every instance in the same kernel calls (one for the forward-difference Jacobian, one for
     the trial step, per iteration); after ``prune_after`` iterations only the best instance of
-    each (group, segment) goes on. ``which[G, n_seg]`` (bool) fits only those segments of
+    each (group, segment) goes on, and a lane that has converged (:data:`STATE_CHI2`) is no
+    longer simulated. ``which[G, n_seg]`` (bool) fits only those segments of
     each group: the others are returned as the group's first start with cost inf (a segment
     fits alone, so the fitted ones are the same as in a fit of all)."""
     n = S0.shape[1]
@@ -146,34 +156,47 @@ def fit_states(sp: ShootingProblem, X: np.ndarray, S0: np.ndarray, group: np.nda
     S = S0[inst, seg_of].copy()
     lam = np.full(inst.shape[0], LM_LAMBDA0)
     cost = np.sum(res(S, inst, seg_of, 1) ** 2, axis=(1, 2))
+    live = np.ones(inst.shape[0], dtype=bool)  # the lanes still moving
+    n_res = len(sp.base.channels) * np.sum(mask, axis=1)  # data residuals per segment
     h = STATE_FD_REL * sig_v
     pruned = False
     for it in range(iterations):
         if not pruned and it == prune_after:
-            S, cost, lam, inst, seg_of = _prune(S, cost, lam, inst, seg_of, group, G, n)
+            S, cost, lam, inst, seg_of, live = _prune(S, cost, lam, inst, seg_of, group, G, n,
+                                                      live)
             pruned = True
-        blocks = [S] + [S + h[s] * np.eye(NV)[s][None, :] for s in range(NV)]
-        R = res(np.concatenate(blocks), inst, seg_of, NV + 1).reshape(NV + 1, S.shape[0], -1)
+        on = np.flatnonzero(live)
+        if on.size == 0:
+            continue
+        Sa = S[on]
+        blocks = [Sa] + [Sa + h[s] * np.eye(NV)[s][None, :] for s in range(NV)]
+        R = res(np.concatenate(blocks), inst[on], seg_of[on], NV + 1).reshape(
+            NV + 1, on.size, -1)
         r0 = R[0]
         Jb = ((R[1:] - r0[None]) / h[:, None, None]).transpose(1, 2, 0)  # [lanes, m, NV]
         A = np.einsum("imk,iml->ikl", Jb, Jb)
         g = np.einsum("imk,im->ik", Jb, r0)
         d = np.einsum("ikk->ik", A).copy()
         d[d <= 0] = 1.0
-        Ad = A + lam[:, None, None] * (d[:, :, None] * np.eye(NV)[None])
+        Ad = A + lam[on][:, None, None] * (d[:, :, None] * np.eye(NV)[None])
         try:
             step = -np.linalg.solve(Ad, g[:, :, None])[:, :, 0]
         except np.linalg.LinAlgError:
-            step = np.zeros_like(S)
+            step = np.zeros_like(Sa)
         step = np.where(np.isfinite(step), step, 0.0)
-        trial = S + step
-        new = np.sum(res(trial, inst, seg_of, 1) ** 2, axis=(1, 2))
-        better = new < cost
-        S[better] = trial[better]
-        cost = np.where(better, new, cost)
-        lam = np.clip(np.where(better, lam / 3.0, lam * 4.0), 1e-9, 1e9)
+        trial = Sa + step
+        new = np.sum(res(trial, inst[on], seg_of[on], 1) ** 2, axis=(1, 2))
+        better = new < cost[on]
+        # a lane has converged when a step lowers its cost by less than STATE_CHI2
+        # residuals' worth (at its own noise level): it is simulated no more
+        done = better & (cost[on] - new < STATE_CHI2 * new / n_res[seg_of[on]])
+        S[on[better]] = trial[better]
+        cost[on] = np.where(better, new, cost[on])
+        lam[on] = np.clip(np.where(better, lam[on] / 3.0, lam[on] * 4.0), 1e-9, 1e9)
+        live[on[done]] = False
     if not pruned:
-        S, cost, lam, inst, seg_of = _prune(S, cost, lam, inst, seg_of, group, G, n)
+        S, cost, lam, inst, seg_of, live = _prune(S, cost, lam, inst, seg_of, group, G, n,
+                                                  live)
     # after pruning: one lane per chosen (group, segment)
     first = np.array([np.flatnonzero(group == g)[0] for g in range(G)])
     S_out = S0[first].copy()
@@ -184,7 +207,8 @@ def fit_states(sp: ShootingProblem, X: np.ndarray, S0: np.ndarray, group: np.nda
 
 
 def _prune(S: np.ndarray, cost: np.ndarray, lam: np.ndarray, inst: np.ndarray,
-           seg_of: np.ndarray, group: np.ndarray, G: int, n: int) -> tuple[np.ndarray, ...]:
+           seg_of: np.ndarray, group: np.ndarray, G: int, n: int, live: np.ndarray
+           ) -> tuple[np.ndarray, ...]:
     """Keep the best lane of each (group, segment) (the first such lane on a tie), ordered
     group-major."""
     key = group[inst] * n + seg_of
@@ -192,7 +216,7 @@ def _prune(S: np.ndarray, cost: np.ndarray, lam: np.ndarray, inst: np.ndarray,
     starts = np.r_[True, key[order][1:] != key[order][:-1]]
     keep = order[starts]
     # each kept lane keeps its own instance's parameters
-    return S[keep], cost[keep], lam[keep], inst[keep], seg_of[keep]
+    return S[keep], cost[keep], lam[keep], inst[keep], seg_of[keep], live[keep]
 
 
 def state_starts(sp: ShootingProblem, x: np.ndarray, recs: list[np.ndarray]) -> np.ndarray:
