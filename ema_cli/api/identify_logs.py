@@ -250,21 +250,23 @@ def identify_closed_loop(config: ConfigSource = None, overrides: Overrides = Non
                        "of it with window (T0, T1) [s], or raise dt_s") from None
 
 
-FIT_PASSES_FIXED = 2300.0
+FIT_PASSES_FIXED = 1580.0
 """Kernel work of a multiple-shooting fit that does not grow with the starts, in passes over
 the whole log at ``dt_s``: the finishing candidates' lengthening, the refinement at the fine
 step, the contact restart, the polish, the intervals and the profile."""
-FIT_PASSES_PER_START = 157.0
+FIT_PASSES_PER_START = 61.0
 """Kernel work per multiple-shooting start, in passes over the log at ``dt_s`` (the start
 states and the joint search). Both from the kernel's lane-step tally of the README's 4 s
 example (`ema identify --make-data closed-loop --noise 1`, then the fit) at 2, 4 and 8
-starts: 1.046e9, 1.138e9 and 1.422e9 lane-steps of 400,000-step passes, 2026-11-27 (the
+starts: 6.63e8, 7.58e8 and 8.18e8 lane-steps of 400,000-step passes, 2026-11-27, after the
+LM's creeping stop, its Broyden-carried Jacobian and the start states' pruning after one
+iteration (before them: 1.046e9, 1.138e9 and 1.422e9, 2300 passes plus 157 per start; the
 earlier model, 440 passes per start and nothing fixed, put 2 starts at 12 s for 45 s)."""
 FIT_OVERHEAD = 3.5
 """A fit's wall time over its kernel time at ``progress.CPU_S_PER_STEP`` on 2 cores (the
 least-squares algebra of the segments, the verdict's checks, the kernel's own speed on these
-variants): the README's 4 s example took 44.8, 46.5 and 55.8 s at 2, 4 and 8 starts for
-40, 43 and 54 s estimated, 2026-11-27."""
+variants): the README's 4 s example took 26.8, 29.6 and 30.3 s at 2, 4 and 8 starts for
+26, 28 and 32 s estimated, 2026-11-27 (44.8, 46.5 and 55.8 s before the changes above)."""
 
 
 def fit_estimate(cfg: Any, duration: float, workers: int | None = None) -> tuple[float, str]:

@@ -39,7 +39,10 @@ step, 4.7 s at the fine one for a 4 s log)."""
 JAC_EVERY = 2
 """A start's finite-difference Jacobian is computed every this many LM iterations, and
 carried along the accepted steps between (:func:`broyden`) [-]. The Jacobian is 1 + p + NV
-kernel lanes per segment (11 to 14), a trial step one."""
+kernel lanes per segment (11 to 14), a trial step one. Measured: 3 to 8 % of a fit's kernel
+work (the README's example, unstated battery log03, stated log07); on stated log07 the
+refinement at the fine step on carried Jacobians stopped with one segment in a wrong minimum
+(J/N 3.4, reported not confirmed) where fresh ones confirm the fit (docs/identification.md)."""
 STALL_WINDOW = 3
 STALL_CHI2 = 0.1
 """A start has stopped moving when its cost fell by less than :data:`STALL_CHI2` residuals'
