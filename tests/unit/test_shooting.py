@@ -228,6 +228,35 @@ def test_short_fit_from_the_default_bounds_lands_on_the_truth(short_fit):
     assert sh["covariance_segments"] == 10 and not sh["fell_back_from_longest_segments"]
 
 
+def test_the_fit_records_the_kernel_work_of_every_problem_it_derived(short_fit):
+    """identification.json's kernel_steps is the whole multiple-shooting fit's work: the
+    search's problem and the ones on longer segments derived from it (before, only the last
+    problem's: 15-20 x too few on a 4 s log). A derived problem adds to the same tally; the
+    short fit's total is above its last problem's own and at least its segments' one pass
+    per start."""
+    from ema_cli.identify.closed_loop import shooting_search as ss
+    from ema_cli.identify.closed_loop.shooting import ShootingProblem, make_segments
+
+    _, fit = short_fit
+    sh = fit.to_json()["shooting"]
+    search_sp = fit.shooting.search.sp
+    assert sh["kernel_steps"] == search_sp.work.kernel_steps
+    assert sh["kernel_steps"] > 2 * search_sp.kernel_steps, (sh["kernel_steps"],
+                                                             search_sp.kernel_steps)
+    assert sh["kernel_s"] > 0.0
+
+    problem, x, sp = _at_truth({"kL": 450.0, "alpha": 0.004, "Fc": 0.03, "sigma2": 0.02}, 1,
+                               0.4, 0.1)
+    sp2 = ShootingProblem(sp.base, make_segments(sp.base.log.t, 0.2), sp.sigma, work=sp.work)
+    V = ss.start_states(sp, x[None], 5e-5)
+    V2 = ss.start_states(sp2, x[None], 5e-5)
+    sp.residuals_many(V, 5e-5)
+    sp2.residuals_many(V2, 5e-5)
+    assert sp.work is sp2.work
+    assert sp.work.kernel_steps == sp.kernel_steps + sp2.kernel_steps > 0
+    assert sp.work.evaluations == sp.evaluations + sp2.evaluations
+
+
 def test_the_fit_itself_is_written_and_drawn_as_the_segments_predict_it(short_fit):
     """fit.csv carries each channel as the segments predict it (the fit itself) beside the
     whole-log run: its weighted RMS is the segments' fit quality in identification.json, and

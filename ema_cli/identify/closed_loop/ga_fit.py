@@ -315,7 +315,7 @@ def run_closed_loop(settings: ClosedLoopSettings, log: ClosedLoopLog | None = No
         timings["ga_s"] = 0.0
         timings["polish_s"] = ms.timings.get("polish_s", 0.0)
         sp = ms.search.sp
-        throughput = sp.kernel_steps / sp.kernel_s if sp.kernel_s > 0 else 0.0
+        throughput = sp.work.kernel_steps / sp.work.kernel_s if sp.work.kernel_s > 0 else 0.0
     else:
         t0 = time.perf_counter()
         spans = horizons(log.duration, settings.ga_horizon_s if settings.polish else None)

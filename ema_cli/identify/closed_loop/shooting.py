@@ -95,6 +95,21 @@ def make_segments(t: np.ndarray, length_s: float, min_samples: int = 10) -> Segm
 
 
 @dataclass
+class KernelWork:
+    """The kernel work of a whole multiple-shooting fit: every problem derived from the
+    search's (longer segments, the covariance's split) adds to the same one."""
+
+    evaluations: int = 0  # simulated segment runs
+    kernel_steps: int = 0  # lane-steps
+    kernel_s: float = 0.0  # seconds in the kernel
+
+    def add(self, evaluations: int, kernel_steps: int, kernel_s: float) -> None:
+        self.evaluations += evaluations
+        self.kernel_steps += kernel_steps
+        self.kernel_s += kernel_s
+
+
+@dataclass
 class ShootingProblem:
     """The multiple-shooting residuals of a closed-loop problem (see the module docstring).
 
@@ -111,6 +126,9 @@ class ShootingProblem:
     evaluations: int = 0  # simulated segment runs
     kernel_steps: int = 0
     kernel_s: float = 0.0
+    work: KernelWork = field(default_factory=KernelWork)
+    """The fit's kernel work, shared with the problems derived from this one (this problem's
+    own is ``evaluations``, ``kernel_steps``, ``kernel_s``)."""
     _refs: dict = field(default_factory=dict, repr=False)
     _plans: dict = field(default_factory=dict, repr=False)
 
@@ -250,6 +268,7 @@ class ShootingProblem:
         self.evaluations += rows.shape[0]
         self.kernel_steps += rows.shape[0] * plan["n_steps"]
         self.kernel_s += res.kernel_s
+        self.work.add(rows.shape[0], rows.shape[0] * plan["n_steps"], res.kernel_s)
         sig = res.signals
         if plan["index"] is not None:
             idx = plan["pad_index"][seg_of_row]  # [rows, L]

@@ -128,7 +128,7 @@ class ShootingOutcome:
             "segment_shift": None if self.segment_shift is None else dict(zip(
                 names, map(float, self.segment_shift), strict=True)),
             "optimum_confirmed": self.confirmed, "not_confirmed_because": self.reasons,
-            "kernel_steps": int(s.sp.kernel_steps), "kernel_s": float(s.sp.kernel_s),
+            "kernel_steps": int(s.sp.work.kernel_steps), "kernel_s": float(s.sp.work.kernel_s),
             "timings_s": {**s.timings, **self.timings},
             "stage_iterations": self.stage_iterations,
             "runner_up_won_on_longer_segments": self.runner_up_won,

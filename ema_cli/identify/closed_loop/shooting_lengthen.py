@@ -62,7 +62,7 @@ def _reseat_on(res: ShootingSearch, seg: Any, dt: float, sweeps: int | None = No
     from ema_cli.identify.closed_loop.shooting import ShootingProblem
 
     sp = res.sp
-    sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie)
+    sp2 = ShootingProblem(sp.base, seg, sp.sigma, tie=sp.tie, work=sp.work)
     x, S = sp.unpack(res.V)
     k = np.clip(np.searchsorted(sp.seg.first, seg.first, side="right") - 1, 0, sp.seg.n - 1)
     kw = {} if sweeps is None else {"sweeps": sweeps}

@@ -35,6 +35,7 @@ def _add(sp: ShootingProblem, before: Counters, after: Counters) -> None:
     sp.evaluations += after[0] - before[0]
     sp.kernel_steps += after[1] - before[1]
     sp.kernel_s += after[2] - before[2]
+    sp.work.add(after[0] - before[0], after[1] - before[1], after[2] - before[2])
 
 
 def _groups(idx: np.ndarray) -> list[np.ndarray]:
