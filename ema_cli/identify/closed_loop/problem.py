@@ -73,6 +73,21 @@ MAX_RECORD_BYTES = 2**28  # the record of one population batch at most (else int
 FAILED_RESIDUAL = 1e6  # weighted residual of a diverged simulation (least-squares polish) [-]
 
 
+@dataclass
+class KernelWork:
+    """The kernel work of a whole multiple-shooting fit: every problem derived from the
+    search's (longer segments, the covariance's split) adds to the same one."""
+
+    evaluations: int = 0  # simulated segment runs
+    kernel_steps: int = 0  # lane-steps
+    kernel_s: float = 0.0  # seconds in the kernel
+
+    def add(self, evaluations: int, kernel_steps: int, kernel_s: float) -> None:
+        self.evaluations += evaluations
+        self.kernel_steps += kernel_steps
+        self.kernel_s += kernel_s
+
+
 @dataclass(frozen=True)
 class ClosedLoopLog:
     """A validated closed-loop log, SI: times from 0 [s], command [rad], measured channels."""

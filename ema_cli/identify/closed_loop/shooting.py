@@ -36,6 +36,7 @@ from ema_cli.identify.closed_loop.problem import (
     ON_GRID_TOL,
     OVERSAMPLE,
     ClosedLoopProblem,
+    KernelWork,
 )
 from ema_cli.model.params import INDEX, to_row
 
@@ -95,21 +96,6 @@ def make_segments(t: np.ndarray, length_s: float, min_samples: int = 10) -> Segm
 
 
 @dataclass
-class KernelWork:
-    """The kernel work of a whole multiple-shooting fit: every problem derived from the
-    search's (longer segments, the covariance's split) adds to the same one."""
-
-    evaluations: int = 0  # simulated segment runs
-    kernel_steps: int = 0  # lane-steps
-    kernel_s: float = 0.0  # seconds in the kernel
-
-    def add(self, evaluations: int, kernel_steps: int, kernel_s: float) -> None:
-        self.evaluations += evaluations
-        self.kernel_steps += kernel_steps
-        self.kernel_s += kernel_s
-
-
-@dataclass
 class ShootingProblem:
     """The multiple-shooting residuals of a closed-loop problem (see the module docstring).
 
@@ -126,9 +112,7 @@ class ShootingProblem:
     evaluations: int = 0  # simulated segment runs
     kernel_steps: int = 0
     kernel_s: float = 0.0
-    work: KernelWork = field(default_factory=KernelWork)
-    """The fit's kernel work, shared with the problems derived from this one (this problem's
-    own is ``evaluations``, ``kernel_steps``, ``kernel_s``)."""
+    work: KernelWork = field(default_factory=KernelWork)  # the fit's, shared when derived
     _refs: dict = field(default_factory=dict, repr=False)
     _plans: dict = field(default_factory=dict, repr=False)
 
