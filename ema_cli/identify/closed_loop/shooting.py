@@ -109,9 +109,6 @@ class ShootingProblem:
     seg: Segments
     sigma: np.ndarray
     tie: bool = False  # the motor-angle tie residuals (:meth:`tie_data`) when the log allows
-    evaluations: int = 0  # simulated segment runs
-    kernel_steps: int = 0
-    kernel_s: float = 0.0
     work: KernelWork = field(default_factory=KernelWork)  # the fit's, shared when derived
     _refs: dict = field(default_factory=dict, repr=False)
     _plans: dict = field(default_factory=dict, repr=False)
@@ -249,9 +246,6 @@ class ShootingProblem:
         # the kernel writes and the runner allocates less, the values are the same bits
         res = simulate_batch(rows, plan["refs"], seg_of_row, dt, plan["n_steps"], plan["dec"],
                              parallel=True, n_signals=max(ch + st) + 1)
-        self.evaluations += rows.shape[0]
-        self.kernel_steps += rows.shape[0] * plan["n_steps"]
-        self.kernel_s += res.kernel_s
         self.work.add(rows.shape[0], rows.shape[0] * plan["n_steps"], res.kernel_s)
         sig = res.signals
         if plan["index"] is not None:

@@ -28,13 +28,11 @@ Counters = tuple[int, int, float]
 
 
 def _counters(sp: ShootingProblem) -> Counters:
-    return sp.evaluations, sp.kernel_steps, sp.kernel_s
+    w = sp.work  # on a worker: its copy's, so before and after differ by the worker's runs
+    return w.evaluations, w.kernel_steps, w.kernel_s
 
 
 def _add(sp: ShootingProblem, before: Counters, after: Counters) -> None:
-    sp.evaluations += after[0] - before[0]
-    sp.kernel_steps += after[1] - before[1]
-    sp.kernel_s += after[2] - before[2]
     sp.work.add(after[0] - before[0], after[1] - before[1], after[2] - before[2])
 
 
