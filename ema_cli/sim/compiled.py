@@ -21,10 +21,13 @@ from pathlib import Path
 from ema_cli import progress
 
 # seconds one unit takes to compile on this kind of machine (2 cores, `ema compile` from an empty
-# cache; the inner functions compiled without numba's wrappers, `ema_cli._numba.njit`: the
-# first unit of a family 12 s, the callees the family shares most of it, each further variant
-# 4-6 s, the identification kernels 2 s): the announcements' estimate
-COMPILE_S = {"rows": 6.5, "lanes": 7.5, "identify": 2.0}
+# cache; the inner functions compiled without numba's wrappers, `ema_cli._numba.njit`): the
+# first unit of a family in a process (it compiles the callees the family shares: the model's
+# functions, the integrator of its `sim.variants.rates_key`) and each further variant (only
+# what the variant decides itself: the time loop and the step around the shared integrator);
+# the identification kernels. The announcements' and `ema compile`'s estimates.
+COMPILE_S = {"rows": (9.5, 2.5), "lanes": (10.5, 2.8), "identify": (2.0, 2.0)}
+_COMPILED_HERE: set[str] = set()  # the families a unit of which this process compiled
 QUIET_ENV = "EMA_COMPILE_QUIET"  # set: compile without announcing (ema compile's workers)
 
 
@@ -59,9 +62,19 @@ def is_cached(name: str) -> bool:
     return _marker(name).is_file()
 
 
-def estimate_s(name: str) -> float:
-    """The estimated compile time of a unit [s]."""
-    return COMPILE_S.get(name.split("/")[0], 5.0)
+def estimate_s(name: str, first: bool | None = None) -> float:
+    """The estimated compile time of a unit [s]: the first of its family in a process, or a
+    further one (``first`` None: whether this process has compiled one of its family yet)."""
+    fam = name.split("/")[0]
+    if first is None:
+        first = fam not in _COMPILED_HERE
+    one, more = COMPILE_S.get(fam, (5.0, 5.0))
+    return one if first else more
+
+
+def family_estimate_s(names: list[str]) -> float:
+    """The estimated time to compile ``names`` (units of one family) in a fresh process [s]."""
+    return sum(estimate_s(n, first=i == 0) for i, n in enumerate(names))
 
 
 def _say(text: str) -> None:
@@ -80,6 +93,7 @@ def announce(name: str) -> Iterator[None]:
         return
     if os.environ.get(QUIET_ENV):  # `ema compile` reports for its workers
         yield
+        _COMPILED_HERE.add(name.split("/")[0])
         with contextlib.suppress(OSError):
             _marker(name).write_text("compiled\n")
         return
@@ -87,6 +101,7 @@ def announce(name: str) -> Iterator[None]:
          f"~{estimate_s(name):.0f} s")
     t0 = time.perf_counter()
     yield
+    _COMPILED_HERE.add(name.split("/")[0])
     with contextlib.suppress(OSError):
         _marker(name).write_text(f"{time.perf_counter() - t0:.3f}\n")
     _say(f"compiled in {time.perf_counter() - t0:.1f} s (cached; `ema compile` compiles all)")

@@ -9,9 +9,16 @@ forces on its body leave its breakaway band; a slipping site whose speed reaches
 reverses. The instant of every switch is located inside the step by regula falsi (Illinois) on
 RK4 sub-steps from the step's start, the inputs interpolated quadratically through the step's
 three samples (:func:`_quad`), so the integration stays fourth order across the switches.
+The step calls :data:`advance_for`, which picks one of the two when the variant is typed; each
+is compiled once per ``sim.variants.rates_key`` (the variants that share a key share it).
 """
 
 from __future__ import annotations
+
+from typing import Any
+
+from numba import config, types
+from numba.extending import intrinsic
 
 from ema_cli._numba import njit
 from ema_cli.model.actuator import (
@@ -20,12 +27,14 @@ from ema_cli.model.actuator import (
     breakaway_nb,
     command_nb,
     controller_nb,
+    flags_nb,
     plant_nb,
     shaft_nb,
 )
 from ema_cli.model.friction import holds_nb
 from ema_cli.sim import layout
 from ema_cli.sim.layout import variant_combine, variant_rates, variant_stage
+from ema_cli.sim.variants import rates_key
 
 MAX_EVENTS = 8  # friction switches located in one step at most (more: the rest in its mode)
 EVENT_ITERATIONS = 60  # regula-falsi iterations locating one switch at most [-]
@@ -263,3 +272,53 @@ def site_on(fl, site):
     if site == 0:
         return fl.static_m and not fl.rigid
     return fl.static_L or (fl.rigid and fl.hybrid)
+
+
+
+def _make_advance(key: int) -> Any:
+    """The integrator of the variants whose ``sim.variants.rates_key`` is ``key``, compiled
+    once for all of them: :func:`hybrid_advance` when the key has static friction, else
+    :func:`rk4` with the modes unchanged. Arguments: (x, h, inp, lp, fl, uh, disc, xn2, tfh,
+    tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw) as :func:`hybrid_advance`'s; returns
+    (state, stuck_m, dir_m, stuck_l, dir_l)."""
+    if flags_nb.py_func(key).hybrid:
+        def advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m, dir_m,  # noqa: ANN001, ANN202
+                    stuck_l, dir_l, hw):
+            return hybrid_advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,
+                                  stuck_m, dir_m, stuck_l, dir_l, hw, key)
+    else:
+        def advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m, dir_m,  # noqa: ANN001, ANN202
+                    stuck_l, dir_l, hw):
+            return (rk4(x, h, inp.r0, inp.r1, inp.r2, inp.l0, inp.l1, inp.l2, inp.e0, inp.e1,
+                        inp.e2, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m, dir_m,
+                        stuck_l, dir_l, hw, key), stuck_m, dir_m, stuck_l, dir_l)
+    return njit(cache=True, forceinline=True, error_model="numpy")(advance)
+
+
+_ADVANCE: dict[int, Any] = {}
+
+
+def _advance_for_py(variant: int) -> Any:
+    """The integrator (:func:`_make_advance`) of the kernel's ``variant``."""
+    key = rates_key(int(variant))
+    if key not in _ADVANCE:
+        _ADVANCE[key] = _make_advance(key)
+    return _ADVANCE[key]
+
+
+@intrinsic
+def _advance_for_nb(typingctx, variant):  # noqa: ANN001, ANN202 (numba's intrinsic API)
+    if not isinstance(variant, types.IntegerLiteral):
+        return None
+    disp = _advance_for_py(variant.literal_value)
+
+    def codegen(context, builder, signature, args):  # noqa: ANN001, ANN202
+        return context.get_dummy_value()
+    return types.Dispatcher(disp)(variant), codegen
+
+
+advance_for = _advance_for_py if config.DISABLE_JIT else _advance_for_nb
+"""The integrator of a kernel variant (a compile-time constant in compiled code): one step from
+the state at its start -> (state, stuck_m, dir_m, stuck_l, dir_l). Chosen when the variant is
+typed, compiled once per ``sim.variants.rates_key`` (the variants that share a key share it), so
+a variant without static friction never compiles the switch search."""

@@ -32,7 +32,7 @@ from ema_cli.model.discrete import BUFFER, discrete_sample_nb, filter_coefficien
 from ema_cli.model.lugre import bristle_step_nb
 from ema_cli.model.params import INDEX, INITIAL_STATE, N_PARAMS
 from ema_cli.sim import layout
-from ema_cli.sim.integrate import hybrid_advance, motor_follows, rk4, site_on
+from ema_cli.sim.integrate import advance_for, motor_follows, site_on
 from ema_cli.sim.layout import (
     START,
     Out,
@@ -159,16 +159,10 @@ def step_nb(x, acc, mem, inp, lp, k, dt, n_steps, in_ss, in_osc, variant, dsc):
     # --- RK4 step (reference, load profile and input signal at the stage times; bristle
     # torques, held command, notch and observer states held)
     xs = layout.set_xI(x, x_i)
-    if fl.hybrid:
-        xn, stuck_m, dir_m, stuck_l, dir_l = hybrid_advance(
-            xs, dt, inp, lp, fl, uh, disc, mem.xn2, tfh, tf_b, visc, tf_bl, stuck_m, mem.dir_m,
-            stuck_l, mem.dir_L, hw, variant)
-    else:
-        xn = rk4(xs, dt, inp.r0, inp.r1, inp.r2, inp.l0, inp.l1, inp.l2, inp.e0, inp.e1,
-                  inp.e2, lp, fl, uh, disc, mem.xn2, tfh, tf_b, visc, tf_bl, stuck_m, mem.dir_m,
-                  stuck_l, mem.dir_L, hw, variant)
-        dir_m = mem.dir_m
-        dir_l = mem.dir_L
+    integrate = advance_for(variant)  # the variant's integrator (RK4, or the switch search)
+    xn, stuck_m, dir_m, stuck_l, dir_l = integrate(
+        xs, dt, inp, lp, fl, uh, disc, mem.xn2, tfh, tf_b, visc, tf_bl, stuck_m, mem.dir_m,
+        stuck_l, mem.dir_L, hw)
     xn = layout.set_z(xn, z_new)
     if fl.lugre_L:
         xn = layout.set_z_L(xn, zl_new)

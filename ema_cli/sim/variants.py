@@ -81,6 +81,28 @@ def variant_order(P: np.ndarray) -> np.ndarray:
     return np.argsort(variant_codes(P), kind="stable")
 
 
+RATES_BITS = ((1 << B_RIGID) | (1 << B_AMP) | (1 << B_AMP_BW) | (3 << B_FRIC_L) | (1 << B_TRANS)
+              | (1 << B_THERMAL))
+"""The bits of a variant code its generated state equations read besides static friction at the
+motor (``sim.layout.source``: the states it integrates, the holds it can have, the flags the
+rates take; ``tests/unit/test_kernel_v2.py`` checks the flags against every code)."""
+
+
+def rates_key(code: int) -> int:
+    """The part of a variant code its integration depends on at compile time: its generated
+    state equations with the flags they read (``sim.layout.source``) and whether it locates
+    static friction's switches (``sim.integrate.advance_for``). The variants with one key share
+    one compiled integrator (RK4 and the switch search); the flags it does not fix (the
+    controller, the extras, the motor's LuGre law) are read from the caller's ``Flags`` and
+    folded once it is inlined into the variant's kernel. The paper's EMA's variants (motor
+    friction none or LuGre, with or without extras) all have key 0."""
+    code = int(code)
+    key = code & RATES_BITS
+    if code & 3 == FRIC_STATIC:
+        key |= FRIC_STATIC
+    return key
+
+
 def one_lane_only(code: int) -> bool:
     """Whether a variant runs one lane at a time whatever the batch's width: a sampled
     controller, a quantiser or a compensator (the extras), static friction (stick-slip), a
