@@ -71,6 +71,11 @@ def flags_nb(variant):
                  (variant >> B_THERMAL) & 1 != 0)
 
 
+def flags_of(code: int) -> Flags:
+    """:func:`flags_nb` from Python (compiled or not: ``NUMBA_DISABLE_JIT``)."""
+    return Flags(*getattr(flags_nb, "py_func", flags_nb)(int(code)))
+
+
 def describe_variant(code: int) -> str:
     """A reader's words for a variant code."""
     code = int(code)

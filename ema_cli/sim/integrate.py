@@ -27,7 +27,7 @@ from ema_cli.model.actuator import (
     breakaway_nb,
     command_nb,
     controller_nb,
-    flags_nb,
+    flags_of,
     plant_nb,
     shaft_nb,
 )
@@ -281,7 +281,7 @@ def _make_advance(key: int) -> Any:
     :func:`rk4` with the modes unchanged. Arguments: (x, h, inp, lp, fl, uh, disc, xn2, tfh,
     tf_b, visc, tf_bl, stuck_m, dir_m, stuck_l, dir_l, hw) as :func:`hybrid_advance`'s; returns
     (state, stuck_m, dir_m, stuck_l, dir_l)."""
-    if flags_nb.py_func(key).hybrid:
+    if flags_of(key).hybrid:
         def advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl, stuck_m, dir_m,  # noqa: ANN001, ANN202
                     stuck_l, dir_l, hw):
             return hybrid_advance(x, h, inp, lp, fl, uh, disc, xn2, tfh, tf_b, visc, tf_bl,

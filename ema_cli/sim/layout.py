@@ -206,7 +206,7 @@ def source(states: tuple = STATES, variant: int | None = None) -> str:
     so the paper's EMA compiles exactly as before actuator descriptions)."""
     fl_values = None
     if variant is not None:
-        fl_values = dict(zip(actuator.FLAGS, actuator.flags_nb.py_func(int(variant)),
+        fl_values = dict(zip(actuator.FLAGS, actuator.flags_of(int(variant)),
                              strict=True))
     st_names = [s.name for s in states]
     lines = [

@@ -93,3 +93,43 @@ def test_ema_compile_from_scratch_then_warm(tmp_path):
     assert "kernels: all 8 units compiled and cached" in warm.stdout
     secs = float(warm.stdout.rsplit("(", 1)[1].split(" s)")[0])
     assert secs < 2.0
+
+
+_PY_MODE = """
+import json, numpy as np
+from ema_cli.model.params import resolve, to_row
+from ema_cli.sim.runner import simulate_batch
+from ema_cli.sim.signals import InputSignal, sample
+out = {}
+for name, ov in (("paper", {"friction": 1, "Fc": 0.02, "vs": 0.1}), ("static", {"friction": 2})):
+    P = np.array([to_row(resolve(ov))])
+    ref = sample(InputSignal("step", 0.01), 1e-5, 60)
+    out[name] = simulate_batch(P, [ref], None, 1e-5, 60, 10, lanes=1).metrics[0].tolist()
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.slow  # the slow tier: pure Python is slow
+def test_the_kernel_runs_as_plain_python_with_the_jit_disabled(tmp_path):
+    # NUMBA_DISABLE_JIT=1 (the module docstring of ema_cli._numba: for debugging) runs the
+    # same kernel as Python, the integrator picked per variant included (sim.integrate,
+    # advance_for): the same metrics as compiled code, to rounding (no fused multiply-adds)
+    import json
+
+    import numpy as np
+
+    def run(disable: bool) -> dict:
+        env = {**os.environ, "EMA_CACHE_DIR": str(tmp_path / "cache")}
+        env.pop("NUMBA_DISABLE_JIT", None)
+        if disable:
+            env["NUMBA_DISABLE_JIT"] = "1"
+        r = subprocess.run([sys.executable, "-c", _PY_MODE], cwd=ROOT, env=env,
+                           capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return json.loads(r.stdout.strip().splitlines()[-1])
+
+    py, jit = run(True), run(False)
+    for name in ("paper", "static"):
+        a, b = np.array(py[name]), np.array(jit[name])
+        assert np.isfinite(b[:3]).all() and b[0] > 0
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-15, equal_nan=True)
