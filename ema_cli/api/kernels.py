@@ -57,10 +57,10 @@ def deal(families: list[list[str]], jobs: int) -> list[list[str]]:
     """Families dealt to ``jobs`` processes, the costliest first to the least loaded."""
     load = [0.0] * jobs
     out: list[list[str]] = [[] for _ in range(jobs)]
-    for fam in sorted(families, key=lambda f: -compiled.family_estimate_s(f)):
+    for fam in sorted(families, key=lambda f: -compiled.units_estimate_s(f)):
         i = load.index(min(load))
         out[i].extend(fam)
-        load[i] += compiled.family_estimate_s(fam)
+        load[i] += compiled.units_estimate_s(fam)
     return out
 
 
@@ -72,9 +72,7 @@ def plan(jobs: int) -> tuple[list[str], list[list[str]], float]:
     for n in todo:
         families.setdefault(family(n), []).append(n)
     shares = deal(list(families.values()), max(1, min(jobs, len(families)))) if todo else []
-    est = max((sum(compiled.family_estimate_s([n for n in sh if family(n) == f])
-                   for f in dict.fromkeys(family(n) for n in sh)) for sh in shares),
-              default=0.0)
+    est = max((compiled.units_estimate_s(sh) for sh in shares), default=0.0)
     return todo, shares, est
 
 

@@ -65,16 +65,24 @@ def is_cached(name: str) -> bool:
 def estimate_s(name: str, first: bool | None = None) -> float:
     """The estimated compile time of a unit [s]: the first of its family in a process, or a
     further one (``first`` None: whether this process has compiled one of its family yet)."""
-    fam = name.split("/")[0]
+    fam = _family(name)
     if first is None:
         first = fam not in _COMPILED_HERE
     one, more = COMPILE_S.get(fam, (5.0, 5.0))
     return one if first else more
 
 
-def family_estimate_s(names: list[str]) -> float:
-    """The estimated time to compile ``names`` (units of one family) in a fresh process [s]."""
-    return sum(estimate_s(n, first=i == 0) for i, n in enumerate(names))
+def units_estimate_s(names: list[str]) -> float:
+    """The estimated time to compile ``names`` in one fresh process [s] (the first unit of each
+    family costs its first-unit time)."""
+    fams = [_family(n) for n in names]
+    return sum(estimate_s(n, first=f not in fams[:i])
+               for i, (n, f) in enumerate(zip(names, fams, strict=True)))
+
+
+def _family(name: str) -> str:
+    """The family of unit ``name`` (``rows``, ``lanes``, ``identify``)."""
+    return name.split("/")[0]
 
 
 def _say(text: str) -> None:
@@ -93,7 +101,7 @@ def announce(name: str) -> Iterator[None]:
         return
     if os.environ.get(QUIET_ENV):  # `ema compile` reports for its workers
         yield
-        _COMPILED_HERE.add(name.split("/")[0])
+        _COMPILED_HERE.add(_family(name))
         with contextlib.suppress(OSError):
             _marker(name).write_text("compiled\n")
         return
@@ -101,7 +109,7 @@ def announce(name: str) -> Iterator[None]:
          f"~{estimate_s(name):.0f} s")
     t0 = time.perf_counter()
     yield
-    _COMPILED_HERE.add(name.split("/")[0])
+    _COMPILED_HERE.add(_family(name))
     with contextlib.suppress(OSError):
         _marker(name).write_text(f"{time.perf_counter() - t0:.3f}\n")
     _say(f"compiled in {time.perf_counter() - t0:.1f} s (cached; `ema compile` compiles all)")

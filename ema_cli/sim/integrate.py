@@ -274,7 +274,6 @@ def site_on(fl, site):
     return fl.static_L or (fl.rigid and fl.hybrid)
 
 
-
 def _make_advance(key: int) -> Any:
     """The integrator of the variants whose ``sim.variants.rates_key`` is ``key``, compiled
     once for all of them: :func:`hybrid_advance` when the key has static friction, else

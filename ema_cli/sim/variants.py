@@ -85,7 +85,7 @@ RATES_BITS = ((1 << B_RIGID) | (1 << B_AMP) | (1 << B_AMP_BW) | (3 << B_FRIC_L) 
               | (1 << B_THERMAL))
 """The bits of a variant code its generated state equations read besides static friction at the
 motor (``sim.layout.source``: the states it integrates, the holds it can have, the flags the
-rates take; ``tests/unit/test_kernel_v2.py`` checks the flags against every code)."""
+rates take; ``tests/unit/test_rates_key.py`` checks the flags against every code)."""
 
 
 def rates_key(code: int) -> int:

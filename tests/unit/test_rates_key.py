@@ -64,8 +64,7 @@ def test_a_code_and_its_key_agree_on_every_flag_the_integration_reads():
     for code in codes:
         key = rates_key(code)
         keys.add(key)
-        a = actuator.Flags(*actuator.flags_nb.py_func(code))
-        b = actuator.Flags(*actuator.flags_nb.py_func(key))
+        a, b = actuator.flags_of(code), actuator.flags_of(key)
         for f in read:
             assert getattr(a, f) == getattr(b, f), (code, key, f)
         assert rates_key(key) == key  # a key is its own key
@@ -85,6 +84,6 @@ def test_a_code_and_its_key_generate_the_same_state_equations():
 def test_the_paper_ema_variants_share_one_integrator():
     # one RK4 (and no switch search) compiled for every variant `ema compile` makes ahead
     assert {rates_key(v) for w in VARIANTS.values() for v in w} == {0}
-    assert not actuator.flags_nb.py_func(0)[actuator.FLAGS.index("hybrid")]
+    assert not actuator.flags_of(0).hybrid
     static = 3 | (1 << B_EXTRAS)
-    assert actuator.flags_nb.py_func(rates_key(static))[actuator.FLAGS.index("hybrid")]
+    assert actuator.flags_of(rates_key(static)).hybrid
